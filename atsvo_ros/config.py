@@ -1,0 +1,378 @@
+"""Configuration: frozen dataclasses loaded and validated from the ROS-parameter YAML files.
+
+The same file serves ``ros2 launch`` (``node_name: ros__parameters: {...}`` or ``/**:``) and the
+offline tools. Nested mappings become sections; every field declares its allowed range in its
+metadata, and a bad value raises :class:`ConfigError` naming the key, the value and the range.
+"""
+from __future__ import annotations
+
+import dataclasses
+import sys
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from atsvo_ros.errors import ConfigError
+
+_IDENTITY16 = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+
+
+def _f(default: Any, lo: float | None = None, hi: float | None = None, *, choices: tuple = (),
+       lo_open: bool = False, doc: str = "") -> Any:
+    """Dataclass field with a validated range (``lo``/``hi`` inclusive unless ``lo_open``)."""
+    meta = {"lo": lo, "hi": hi, "choices": choices, "lo_open": lo_open, "doc": doc}
+    if isinstance(default, (list, tuple)):
+        return field(default_factory=lambda d=tuple(default): d, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """Fallback intrinsics when no camera_info message is available (ROS camera model fields)."""
+
+    width: int = _f(640, 1, 10000)
+    height: int = _f(480, 1, 10000)
+    fx: float = _f(386.0, 0.0, 1e5, lo_open=True)
+    fy: float = _f(386.0, 0.0, 1e5, lo_open=True)
+    cx: float = _f(320.0, -1e4, 1e4)
+    cy: float = _f(240.0, -1e4, 1e4)
+    distortion_model: str = _f("plumb_bob", choices=("none", "plumb_bob", "rational_polynomial", "equidistant"))
+    D: tuple[float, ...] = _f((0.0, 0.0, 0.0, 0.0, 0.0))
+    use_camera_info: bool = _f(True, doc="prefer the camera_info topic over these values")
+
+    def model(self):
+        """The :class:`~atsvo_ros.core.camera.CameraModel` these values describe."""
+        from atsvo_ros.core.camera import CameraModel
+
+        return CameraModel(self.width, self.height, self.fx, self.fy, self.cx, self.cy,
+                           self.distortion_model, self.D)
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Extrinsics (row-major 4x4) and depth conventions of the sensor rig."""
+
+    T_base_rgb: tuple[float, ...] = _f(_IDENTITY16, doc="colour optical frame in the robot base frame")
+    T_rgb_event: tuple[float, ...] = _f(_IDENTITY16, doc="event camera frame in the colour optical frame")
+    depth_scale_m: float = _f(0.001, 0.0, 10.0, lo_open=True, doc="metres per 16UC1 depth unit")
+    depth_min_m: float = _f(0.3, 0.0, 100.0)
+    depth_max_m: float = _f(6.0, 0.0, 1000.0, lo_open=True)
+    sync_tolerance_s: float = _f(0.01, 0.0, 1.0, doc="max RGB/depth stamp difference for a pair")
+
+    def T_base_rgb_matrix(self) -> np.ndarray:
+        return np.asarray(self.T_base_rgb, dtype=np.float64).reshape(4, 4)
+
+    def T_rgb_event_matrix(self) -> np.ndarray:
+        return np.asarray(self.T_rgb_event, dtype=np.float64).reshape(4, 4)
+
+
+@dataclass(frozen=True)
+class TopicsConfig:
+    """Topic and frame names (REP 105: the odometry is odom -> base_link)."""
+
+    rgb: str = "/camera/camera/color/image_raw"
+    rgb_info: str = "/camera/camera/color/camera_info"
+    depth: str = "/camera/camera/aligned_depth_to_color/image_raw"
+    events: str = "/dvxplorer/events"
+    event_info: str = "/dvxplorer/camera_info"
+    ground_truth: str = "/ground_truth/pose"
+    odometry: str = "/atsvo/odometry"
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+
+
+@dataclass(frozen=True)
+class AtsConfig:
+    """Adaptive time surface (Eq. 1-2): decay bounds, neighbour pattern, smoothing."""
+
+    tau_u_s: float = _f(0.03, 0.0, 10.0, lo_open=True, doc="upper bound of the decay time constant")
+    tau_l_s: float = _f(0.003, 0.0, 10.0, lo_open=True, doc="lower bound of the decay time constant")
+    n_latest: int = _f(4, 1, 16, doc="number of latest neighbours of the 16-pixel ring used in Eq. 2")
+    pattern_radius_px: int = _f(3, 1, 8, doc="radius of the 16-pixel neighbour ring (3 = FAST circle)")
+    blur_ksize: int = _f(3, 1, 31, doc="box blur kernel after Eq. 2 (1 = off)")
+    median_ksize: int = _f(3, 1, 31, doc="median blur kernel after Eq. 2 (1 = off, odd)")
+    constant_tau_s: float = _f(0.03, 0.0, 10.0, lo_open=True, doc="tau of the constant-tau baseline")
+
+
+@dataclass(frozen=True)
+class RgbSelectionConfig:
+    """DSO-style block-gradient pixel selection on the colour image."""
+
+    block_size_px: int = _f(16, 4, 256, doc="d in d x d blocks")
+    target_points: int = _f(1200, 10, 100000)
+    min_gradient: float = _f(7.0, 0.0, 255.0, doc="absolute floor of the gradient threshold")
+    border_px: int = _f(8, 0, 100)
+
+
+@dataclass(frozen=True)
+class EventSelectionConfig:
+    """Event pixel selection on the ATS (Section II-B, Eq. 3)."""
+
+    alpha: float = _f(1.0, 0.0, 100.0, doc="gradient scale in I + alpha * grad > h")
+    h: float = _f(200.0, 0.0, 2000.0, doc="threshold h of Eq. 3 on the 0-255 ATS")
+    min_distance_px: int = _f(3, 0, 100, doc="d of Eq. 3: minimum spacing in x and y")
+    mask_median_ksize: int = _f(5, 1, 31, doc="median blur kernel of the ATS mask (odd)")
+    window_fraction: float = _f(0.25, 0.0, 1.0, lo_open=True, doc="share of the ATS window whose events are candidates")
+    max_points: int = _f(600, 1, 100000)
+    border_px: int = _f(4, 0, 100)
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Coarse-to-fine photometric alignment (Eq. 4)."""
+
+    pyramid_levels: int = _f(4, 1, 8)
+    max_iterations: int = _f(20, 1, 200, doc="Gauss-Newton/LM iterations per pyramid level")
+    huber_delta: float = _f(9.0, 0.0, 255.0, lo_open=True, doc="Huber threshold on the patch residual (intensity)")
+    outlier_threshold: float = _f(40.0, 0.0, 1000.0, lo_open=True, doc="residual above which a point is an outlier")
+    convergence_eps: float = _f(1e-5, 0.0, 1.0, lo_open=True, doc="stop when the update norm falls below this")
+    w_rgb: float = _f(1.0, 0.0, 1e6, doc="omega_1 of Eq. 4")
+    w_event: float = _f(1.0, 0.0, 1e6, doc="omega_2 of Eq. 4 (0 = RGB only)")
+    motion_threshold_rot_deg: float = _f(3.0, 0.0, 180.0, doc="inter-frame rotation that activates event fusion")
+    motion_threshold_trans_m: float = _f(0.05, 0.0, 10.0, doc="inter-frame translation that activates event fusion")
+    min_inlier_fraction: float = _f(0.3, 0.0, 1.0, doc="below this the frame is lost")
+
+
+@dataclass(frozen=True)
+class MappingConfig:
+    """Keyframes from the nine-region health rule (Section II-C) and map bookkeeping."""
+
+    region_min_points: int = _f(20, 1, 100000, doc="tracked points that make one of the 3x3 regions healthy")
+    min_healthy_regions: int = _f(7, 1, 9)
+    min_tracked_fraction: float = _f(0.6, 0.0, 1.0, doc="tracked/selected ratio below which a keyframe is added")
+    max_keyframes: int = _f(6, 1, 1000, doc="keyframes in the local map")
+    max_points: int = _f(6000, 100, 10000000)
+
+
+@dataclass(frozen=True)
+class AtsvoConfig:
+    """Everything the pipeline needs; one instance is passed into the core."""
+
+    rgb_camera: CameraConfig = field(default_factory=CameraConfig)
+    event_camera: CameraConfig = field(default_factory=lambda: CameraConfig(320, 240, 270.0, 268.0, 160.0, 120.0))
+    rig: RigConfig = field(default_factory=RigConfig)
+    topics: TopicsConfig = field(default_factory=TopicsConfig)
+    ats: AtsConfig = field(default_factory=AtsConfig)
+    rgb_selection: RgbSelectionConfig = field(default_factory=RgbSelectionConfig)
+    event_selection: EventSelectionConfig = field(default_factory=EventSelectionConfig)
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    mapping: MappingConfig = field(default_factory=MappingConfig)
+    mode: str = _f("fused", choices=("fused", "rgbd"), doc="rgbd = never use events")
+
+
+# ---------------------------------------------------------------------------- loading
+
+
+def _field_types(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _coerce(key: str, value: Any, typ: Any, f: dataclasses.Field) -> Any:
+    """Convert a YAML/ROS value to the field's type and check its range; raise ConfigError."""
+    meta = f.metadata
+    origin = typing.get_origin(typ)
+    try:
+        if origin is tuple:
+            if not isinstance(value, (list, tuple)):
+                raise TypeError("expected a list")
+            out: Any = tuple(float(v) for v in value)
+            default = f.default_factory() if f.default_factory is not dataclasses.MISSING else ()
+            if key.split(".")[-1].startswith("T_") and len(out) != 16:
+                raise ConfigError(f"{key} = {value!r} must be a row-major 4x4 matrix (16 numbers)")
+            if default and key.split(".")[-1] != "D" and len(out) != len(default):
+                raise ConfigError(f"{key} = {value!r} must have {len(default)} elements")
+            return out
+        if typ is bool:
+            if not isinstance(value, bool):
+                raise TypeError("expected true or false")
+            return value
+        if typ is int:
+            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+                raise TypeError("expected an integer")
+            out = int(value)
+        elif typ is float:
+            if isinstance(value, bool):
+                raise TypeError("expected a number")
+            out = float(value)
+        elif typ is str:
+            if not isinstance(value, str):
+                raise TypeError("expected a string")
+            out = value
+        else:
+            out = value
+    except ConfigError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{key} = {value!r} has the wrong type: {exc}") from None
+    if meta.get("choices") and out not in meta["choices"]:
+        raise ConfigError(f"{key} = {value!r} is not allowed (choose one of {', '.join(meta['choices'])})")
+    lo, hi = meta.get("lo"), meta.get("hi")
+    if isinstance(out, (int, float)) and (lo is not None or hi is not None):
+        bad = (not np.isfinite(out)
+               or (lo is not None and (out <= lo if meta.get("lo_open") else out < lo))
+               or (hi is not None and out > hi))
+        if bad:
+            left = "(" if meta.get("lo_open") else "["
+            raise ConfigError(f"{key} = {value!r} is out of range: allowed {left}{lo}, {hi}]")
+    return out
+
+
+def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'} must be a mapping, got {type(data).__name__}")
+    types_ = _field_types(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ConfigError(f"unknown key {prefix}{unknown[0]} (known in {prefix.rstrip('.') or 'top level'}: "
+                          f"{', '.join(sorted(fields))})")
+    kwargs = {}
+    for name, value in data.items():
+        typ = types_[name]
+        if dataclasses.is_dataclass(typ):
+            kwargs[name] = _build(typ, value, f"{prefix}{name}.")
+        else:
+            kwargs[name] = _coerce(prefix + name, value, typ, fields[name])
+    obj = cls(**kwargs)
+    _check_cross_fields(obj, prefix)
+    return obj
+
+
+def _check_cross_fields(obj: Any, prefix: str) -> None:
+    if isinstance(obj, AtsConfig):
+        if obj.tau_l_s > obj.tau_u_s:
+            raise ConfigError(f"{prefix}tau_l_s = {obj.tau_l_s} must not exceed {prefix}tau_u_s = {obj.tau_u_s}")
+        if obj.median_ksize % 2 == 0:
+            raise ConfigError(f"{prefix}median_ksize = {obj.median_ksize} must be odd")
+    if isinstance(obj, EventSelectionConfig) and obj.mask_median_ksize % 2 == 0:
+        raise ConfigError(f"{prefix}mask_median_ksize = {obj.mask_median_ksize} must be odd")
+    if isinstance(obj, RigConfig):
+        if obj.depth_min_m >= obj.depth_max_m:
+            raise ConfigError(f"{prefix}depth_min_m = {obj.depth_min_m} must be below "
+                              f"{prefix}depth_max_m = {obj.depth_max_m}")
+        from atsvo_ros.core.geometry import check_pose
+        from atsvo_ros.errors import GeometryError
+
+        for name in ("T_base_rgb", "T_rgb_event"):
+            try:
+                check_pose(np.asarray(getattr(obj, name)).reshape(4, 4), tol=1e-4)
+            except GeometryError as exc:
+                raise ConfigError(f"{prefix}{name} = {list(getattr(obj, name))} "
+                                  f"is not a rigid transform: {exc}") from None
+
+
+def config_from_dict(params: dict[str, Any]) -> AtsvoConfig:
+    """Build a validated config from nested (``{'ats': {'tau_u_s': ..}}``) or dotted keys."""
+    return _build(AtsvoConfig, unflatten(params), "")
+
+
+def unflatten(params: dict[str, Any]) -> dict[str, Any]:
+    """Turn ROS-style dotted keys (``ats.tau_u_s``) into nested dicts; nested input passes through."""
+    out: dict[str, Any] = {}
+    for key, value in params.items():
+        node = out
+        parts = str(key).split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise ConfigError(f"key {key} conflicts with a value at {part}")
+        if isinstance(value, dict):
+            node.setdefault(parts[-1], {}).update(unflatten(value))
+        else:
+            node[parts[-1]] = value
+    return out
+
+
+def flatten(cfg: Any, prefix: str = "") -> dict[str, Any]:
+    """Dotted-key dict of a config (what a ROS node declares as parameters)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(value):
+            out.update(flatten(value, f"{prefix}{f.name}."))
+        else:
+            out[prefix + f.name] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
+def ros_parameters(document: dict[str, Any], node_name: str | None = None) -> dict[str, Any]:
+    """Merge the ``ros__parameters`` of ``/**`` and of ``node_name`` (node wins) from a YAML document."""
+    if not isinstance(document, dict):
+        raise ConfigError("parameter file must be a mapping of node names to ros__parameters")
+    merged: dict[str, Any] = {}
+    found = False
+    for key in ("/**", "**", node_name, f"/{node_name}" if node_name else None):
+        if key and isinstance(document.get(key), dict) and "ros__parameters" in document[key]:
+            merged.update(unflatten(document[key]["ros__parameters"] or {}))
+            found = True
+    if not found:
+        nodes = [k for k, v in document.items() if isinstance(v, dict) and "ros__parameters" in v]
+        if len(nodes) == 1:
+            merged = unflatten(document[nodes[0]]["ros__parameters"] or {})
+        elif not nodes:
+            raise ConfigError("parameter file has no 'ros__parameters' section")
+        else:
+            raise ConfigError(f"parameter file has several nodes ({', '.join(nodes)}); name one")
+    return merged
+
+
+def load_config(path: str | Path | None = None, node_name: str | None = None,
+                overrides: dict[str, Any] | None = None) -> AtsvoConfig:
+    """Load a ROS-parameter YAML (or a bundled preset name such as ``mini_cheetah``) into a config.
+
+    ``path=None`` gives the defaults; ``overrides`` (dotted or nested keys) win over the file.
+    """
+    import yaml
+
+    params: dict[str, Any] = {}
+    if path is not None:
+        p = resolve_config_path(path)
+        try:
+            document = yaml.safe_load(p.read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            raise ConfigError(f"cannot read config {p}: {exc}") from None
+        params = ros_parameters(document, node_name)
+    if overrides:
+        params = _deep_merge(params, unflatten(overrides))
+    return config_from_dict(params)
+
+
+def _deep_merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = _deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def config_dir() -> Path:
+    """Directory holding the bundled YAML presets (source tree, pip install or ament share)."""
+    here = Path(__file__).resolve().parent
+    for cand in (here / "config", here.parent / "config", Path(sys.prefix) / "share" / "atsvo_ros" / "config"):
+        if (cand / "mini_cheetah.yaml").is_file():
+            return cand
+    try:  # installed by colcon: share/atsvo_ros/config
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory("atsvo_ros")) / "config"
+    except Exception:
+        return here / "config"
+
+
+def resolve_config_path(path: str | Path) -> Path:
+    """A file path, or the name of a bundled preset (``mini_cheetah``, ``mvsec``, ``synthetic``)."""
+    p = Path(path)
+    if p.is_file():
+        return p
+    preset = config_dir() / f"{Path(str(path)).stem}.yaml"
+    if preset.is_file() and not p.suffix:
+        return preset
+    raise ConfigError(f"config file {path} not found (bundled presets: "
+                      f"{', '.join(sorted(q.stem for q in config_dir().glob('*.yaml')))})")
+
+
+__all__ = ["AtsConfig", "AtsvoConfig", "CameraConfig", "EventSelectionConfig", "MappingConfig",
+           "RgbSelectionConfig", "RigConfig", "TopicsConfig", "TrackerConfig", "config_from_dict",
+           "flatten", "load_config", "ros_parameters", "unflatten"]

@@ -1,0 +1,41 @@
+"""Image pyramids for coarse-to-fine alignment."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from atsvo_ros.core.camera import CameraModel
+
+
+def build_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
+    """Float32 pyramid, level 0 = input, each level half the size (2x2 box average, like DSO).
+
+    The box average keeps the pixel-centre convention used by :meth:`CameraModel.scaled`.
+    """
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    pyr = [img]
+    for _ in range(1, levels):
+        h, w = pyr[-1].shape[:2]
+        if h < 2 or w < 2:
+            break
+        h2, w2 = h // 2, w // 2
+        pyr.append(cv2.resize(pyr[-1][: 2 * h2, : 2 * w2], (w2, h2), interpolation=cv2.INTER_AREA))
+    return pyr
+
+
+def pyramid_cameras(camera: CameraModel, levels: int) -> list[CameraModel]:
+    """Pinhole models matching :func:`build_pyramid` levels (camera must be undistorted)."""
+    cams = [camera]
+    for _ in range(1, levels):
+        cams.append(cams[-1].scaled(0.5))
+    return cams
+
+
+def image_gradients(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Central-difference gradients (gx, gy) in intensity units per pixel, float32."""
+    img = np.asarray(image, dtype=np.float32)
+    gx = np.zeros_like(img)
+    gy = np.zeros_like(img)
+    gx[:, 1:-1] = 0.5 * (img[:, 2:] - img[:, :-2])
+    gy[1:-1, :] = 0.5 * (img[2:, :] - img[:-2, :])
+    return gx, gy

@@ -1,0 +1,49 @@
+"""Exception hierarchy: one root, one subclass per layer, so callers can catch at the right level.
+
+CLIs turn any ``AtsvoError`` into a one-line message and exit code 1; nodes log, count and recover.
+"""
+from __future__ import annotations
+
+
+class AtsvoError(Exception):
+    """Root of every error raised on purpose by atsvo_ros."""
+
+
+class ConfigError(AtsvoError, ValueError):
+    """A configuration value is missing, of the wrong type or out of its allowed range."""
+
+
+class CalibrationError(AtsvoError, ValueError):
+    """A camera model or extrinsic could not be built from the given calibration."""
+
+
+class GeometryError(AtsvoError, ValueError):
+    """Invalid input to an SE(3)/SO(3) operation (wrong shape, not a rotation, NaN)."""
+
+
+class DecodeError(AtsvoError):
+    """An event message or file could not be decoded (unknown encoding, truncated buffer, ...)."""
+
+
+class ImageError(AtsvoError):
+    """An image message has an unsupported encoding or inconsistent size."""
+
+
+class BagError(AtsvoError):
+    """A bag could not be opened, or lacks a topic that the replay needs."""
+
+
+class TrajectoryError(AtsvoError):
+    """A trajectory file is malformed, or two trajectories cannot be associated."""
+
+
+class EvaluationError(AtsvoError):
+    """Metrics cannot be computed (too few matched poses, degenerate alignment, ...)."""
+
+
+class TrackingError(AtsvoError):
+    """The tracker was given inconsistent input (internal failures are reported as a status)."""
+
+
+class SimulationError(AtsvoError):
+    """A synthetic sequence could not be generated with the requested settings."""

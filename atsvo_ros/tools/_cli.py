@@ -1,0 +1,50 @@
+"""Shared CLI plumbing: turn AtsvoError (and user errors) into one line on stderr and exit code 1."""
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+
+from atsvo_ros.errors import AtsvoError
+
+
+def run(main: Callable[[argparse.Namespace], int | None], parser: argparse.ArgumentParser,
+        argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv``, call ``main(args)``; map known errors to a one-line message and exit code 1."""
+    args = parser.parse_args(argv)
+    prog = parser.prog
+    try:
+        code = main(args)
+    except AtsvoError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    except FileNotFoundError as exc:
+        print(f"{prog}: error: file not found: {exc.filename or exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+    return int(code or 0)
+
+
+def add_config_args(parser: argparse.ArgumentParser, default: str | None = None) -> None:
+    """``--config`` (a YAML file or a bundled preset name) and repeatable ``--set key=value``."""
+    parser.add_argument("--config", default=default,
+                        help="ROS-parameter YAML or preset name (mini_cheetah, mvsec, synthetic)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override one parameter, e.g. --set ats.tau_u_s=0.05 (YAML value syntax)")
+
+
+def parse_overrides(pairs: Sequence[str]) -> dict[str, object]:
+    """``['ats.tau_u_s=0.05']`` -> ``{'ats.tau_u_s': 0.05}`` (values parsed as YAML scalars)."""
+    import yaml
+
+    from atsvo_ros.errors import ConfigError
+
+    out: dict[str, object] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--set expects KEY=VALUE, got {pair!r}")
+        out[key.strip()] = yaml.safe_load(value)
+    return out

@@ -1,0 +1,61 @@
+"""Packaging for atsvo_ros: an ament_python ROS 2 package that also installs with plain pip."""
+from __future__ import annotations
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "atsvo_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    description="Event + RGB-D direct visual odometry for agile legged robots (adaptive time surface)",
+    long_description=open("README.md", encoding="utf-8").read(),
+    long_description_content_type="text/markdown",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
+    ],
+    package_data={PACKAGE: ["config/*.yaml"]},
+    include_package_data=True,
+    install_requires=[
+        "setuptools",
+        "numpy>=1.24",
+        "numba>=0.58",
+        "opencv-python-headless>=4.8",
+        "rosbags>=0.10",
+        "pyyaml>=6",
+        "matplotlib>=3.7",
+        "tqdm>=4.60",
+    ],
+    extras_require={
+        # AEDAT4 files (DVXplorer's own format).
+        "aedat": ["aedat>=2.0"],
+        # MVSEC HDF5 files.
+        "mvsec": ["h5py>=3.8"],
+        # Cross-checking metrics against evo (GPL-3.0: optional, evaluation only).
+        "eval": ["evo>=1.20"],
+        "test": [
+            "pytest>=7",
+            "ruff>=0.4",
+            "aedat>=2.0",
+            "h5py>=3.8",
+            "evo>=1.20",
+        ],
+    },
+    zip_safe=True,
+    maintainer="atsvo_ros team",
+    maintainer_email="atsvo@example.com",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "atsvo-info = atsvo_ros.tools.info:main",
+        ],
+    },
+)
