@@ -1,0 +1,1 @@
+"""I/O: event decoders, image conversion, bag reading, trajectory files. No ROS install needed."""
