@@ -21,7 +21,7 @@ def test_ruff_is_clean():
     ruff = shutil.which("ruff")
     if ruff is None:
         pytest.skip("ruff not installed (pip install -e '.[test]')")
-    out = subprocess.run([ruff, "check", "atsvo_ros", "test", "setup.py"], cwd=ROOT,
+    out = subprocess.run([ruff, "check", "atsvo_ros", "test", "launch", "setup.py"], cwd=ROOT,
                          capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
 
