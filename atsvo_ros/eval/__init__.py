@@ -1,0 +1,1 @@
+"""Evaluation: ATE / RPE metrics against ground truth (numpy) and matplotlib plots."""
