@@ -1,0 +1,5 @@
+"""Synthetic legged-robot sequences: scenes, gaits, RGB-D and event sensor models, bag writer.
+
+The in-memory API (:mod:`atsvo_ros.sim.sequence`) feeds tests and accuracy runs; ``atsvo-sim``
+writes the same data as a ROS 1 / ROS 2 bag with the robot's (or MVSEC's) topics.
+"""
