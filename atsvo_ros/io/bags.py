@@ -1,0 +1,404 @@
+"""Streaming bag reading (ROS 1 .bag, ROS 2 sqlite3 / mcap) with rosbags, no ROS install needed.
+
+:class:`Bag` opens a ROS 1 ``.bag`` file, a ROS 2 bag directory, or a bare ``.mcap`` / ``.db3``
+file (also a directory whose ``metadata.yaml`` is missing or names no storage plugin: a
+metadata file is synthesised next to symlinks in a temporary directory). It resolves the topics
+the replay needs (explicit names > the configuration's topics > every bundled preset's topics >
+detection by message type and name) and yields the messages merged in time order, one at a time,
+so memory does not grow with the bag. Event messages are decoded from the raw bytes (no per-event
+Python objects) by the stateful decoder of :mod:`atsvo_ros.io.decode`.
+"""
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from atsvo_ros.errors import AtsvoError, BagError
+
+#: roles the replay understands, in the order they are reported
+ROLES = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth", "tf_static")
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+INFO_TYPES = ("sensor_msgs/msg/CameraInfo",)
+POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
+              "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry")
+TF_TYPES = ("tf2_msgs/msg/TFMessage",)
+PRESETS = ("mini_cheetah", "mvsec", "synthetic")
+
+
+@dataclass(frozen=True)
+class TopicSelection:
+    """Topic chosen for each role (None = not in the bag)."""
+
+    rgb: str | None = None
+    depth: str | None = None
+    events: str | None = None
+    rgb_info: str | None = None
+    event_info: str | None = None
+    ground_truth: str | None = None
+    tf_static: str | None = None
+
+    def items(self) -> list[tuple[str, str]]:
+        return [(f.name, getattr(self, f.name)) for f in fields(self) if getattr(self, f.name)]
+
+    def role_of(self) -> dict[str, str]:
+        """topic -> role."""
+        return {topic: role for role, topic in self.items()}
+
+
+@dataclass(frozen=True)
+class BagMessage:
+    """One message of the stream: deserialized ``msg``, or decoded ``events`` for event topics."""
+
+    role: str
+    topic: str
+    msgtype: str
+    log_time_ns: int
+    msg: Any = None
+    events: Any = None
+
+
+# ---------------------------------------------------------------------------- opening
+
+
+def _metadata_ok(folder: Path) -> bool:
+    import yaml
+
+    meta = folder / "metadata.yaml"
+    if not meta.is_file():
+        return False
+    try:
+        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+    except Exception:
+        return False
+    return info.get("storage_identifier") in ("sqlite3", "mcap")
+
+
+def _stage(files: list[Path], tmp: Path) -> Path:
+    """Write a metadata.yaml for bare storage files (symlinked into ``tmp``); return the bag dir."""
+    import yaml
+    from rosbags.rosbag2.storage_mcap import McapReader
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
+    storage = "mcap" if files[0].suffix == ".mcap" else "sqlite3"
+    counts: dict[tuple[str, str], int] = {}
+    start, end, total = 2**63 - 1, 0, 0
+    for f in files:
+        reader = McapReader(f) if storage == "mcap" else Sqlite3Reader(f)
+        reader.open()
+        try:
+            for c in reader.connections:
+                counts[(c.topic, c.msgtype)] = counts.get((c.topic, c.msgtype), 0) + int(c.msgcount)
+            if storage == "mcap" and reader.statistics:
+                st = reader.statistics
+                start, end, total = min(start, st.start_time), max(end, st.end_time), total + st.message_count
+            elif storage == "sqlite3":
+                lo, hi, n = reader.dbconn.cursor().execute(
+                    "SELECT min(timestamp), max(timestamp), count(*) FROM messages").fetchone()
+                if n:
+                    start, end, total = min(start, lo), max(end, hi), total + n
+        finally:
+            reader.close()
+        (tmp / f.name).symlink_to(f.resolve())
+    if not total:
+        start = end = 0
+    meta = {"rosbag2_bagfile_information": {
+        "version": 5, "storage_identifier": storage,
+        "duration": {"nanoseconds": int(end - start)}, "starting_time": {"nanoseconds_since_epoch": int(start)},
+        "message_count": int(total),
+        "topics_with_message_count": [
+            {"topic_metadata": {"name": t, "type": m, "serialization_format": "cdr", "offered_qos_profiles": ""},
+             "message_count": n} for (t, m), n in counts.items()],
+        "compression_format": "", "compression_mode": "",
+        "relative_file_paths": [f.name for f in files], "files": [],
+    }}
+    (tmp / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    return tmp
+
+
+def open_any_reader(path: str | Path, tmpdir: str | None = None) -> Any:
+    """An (unopened) rosbags AnyReader for any supported bag layout; BagError when it is not a bag."""
+    from rosbags.highlevel import AnyReader
+
+    from atsvo_ros.io.msgtypes import typestore
+
+    p = Path(path)
+    if not p.exists():
+        raise BagError(f"bag {p} does not exist")
+    target = p
+    if p.is_file() and p.suffix == ".bag":
+        store = typestore(1)
+    else:
+        store = typestore(2)
+        if not (p.is_dir() and _metadata_ok(p)):
+            if p.is_file() and p.suffix in (".mcap", ".db3"):
+                files = [p]
+            elif p.is_dir():
+                files = sorted(p.glob("*.mcap")) or sorted(p.glob("*.db3"))
+            else:
+                files = []
+            if not files:
+                raise BagError(f"{p} is not a bag: expected a ROS 1 .bag file, a ROS 2 bag directory "
+                               "or a .mcap / .db3 file")
+            if tmpdir is None:
+                raise BagError(f"{p} needs a staging directory (no usable metadata.yaml)")
+            try:
+                target = _stage(files, Path(tmpdir))
+            except Exception as exc:
+                raise BagError(f"cannot read bag {p}: {exc}") from None
+    try:
+        return AnyReader([target], default_typestore=store)
+    except Exception as exc:
+        raise BagError(f"cannot open bag {p}: {exc}") from None
+
+
+# ---------------------------------------------------------------------------- topic resolution
+
+
+def preset_topics(name: str) -> dict[str, str]:
+    """The ``topics`` section of a bundled preset (or of a YAML path) as role -> topic."""
+    from atsvo_ros.config import load_config
+
+    t = load_config(name).topics
+    return {r: getattr(t, r) for r in ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")}
+
+
+def _detect(role: str, topics: dict[str, str], chosen: dict[str, str | None]) -> str | None:
+    """Pick a topic for ``role`` from message types and names when no preset names it."""
+    from atsvo_ros.io.msgtypes import EVENT_MSGTYPES
+
+    def only(cands: list[str]) -> str | None:
+        return cands[0] if len(cands) == 1 else None
+
+    images = [t for t, m in topics.items() if m in IMAGE_TYPES]
+    if role == "events":
+        return only([t for t, m in topics.items() if m in EVENT_MSGTYPES]) or \
+            next((t for t, m in topics.items() if m in EVENT_MSGTYPES and "left" in t), None)
+    if role == "depth":
+        return only([t for t in images if "depth" in t.lower()])
+    if role == "rgb":
+        cands = [t for t in images if "depth" not in t.lower()]
+        return only(cands) or only([t for t in cands if any(k in t.lower() for k in ("color", "rgb"))]) or \
+            only([t for t in cands if "left" in t.lower() and "image_raw" in t.lower()])
+    if role in ("rgb_info", "event_info"):
+        base = chosen.get("rgb" if role == "rgb_info" else "events")
+        if not base:
+            return None
+        ns = base.rsplit("/", 1)[0]
+        cand = [t for t, m in topics.items() if m in INFO_TYPES and t.rsplit("/", 1)[0] == ns]
+        return only(cand)
+    if role == "ground_truth":
+        cands = [t for t, m in topics.items() if m in POSE_TYPES]
+        return only(cands) or only([t for t in cands if any(k in t.lower() for k in ("ground_truth", "gt", "pose"))])
+    if role == "tf_static":
+        return "/tf_static" if topics.get("/tf_static") in TF_TYPES else None
+    return None
+
+
+def resolve_topics(topics: dict[str, str], explicit: dict[str, str | None] | None = None,
+                   config_topics: dict[str, str] | None = None, presets: Iterable[str] = PRESETS) -> TopicSelection:
+    """Choose a topic per role: explicit > config > presets > detection. Explicit names must exist."""
+    explicit = {k: v for k, v in (explicit or {}).items() if v}
+    chosen: dict[str, str | None] = {}
+    for role, name in explicit.items():
+        if role not in ROLES:
+            raise BagError(f"unknown topic role {role!r} (known: {', '.join(ROLES)})")
+        if name not in topics:
+            raise BagError(f"topic {name} (given for {role}) is not in the bag; it has: {', '.join(sorted(topics))}")
+        chosen[role] = name
+    candidates = [config_topics or {}] + [preset_topics(p) for p in presets]
+    for role in ROLES:
+        if role in chosen:
+            continue
+        chosen[role] = next((c[role] for c in candidates if c.get(role) in topics), None)
+        if chosen[role] is None:
+            chosen[role] = _detect(role, topics, chosen)
+    return TopicSelection(**chosen)
+
+
+# ---------------------------------------------------------------------------- the stream
+
+
+def _event_decoder(msgtype: str, ros_version: int) -> Any:
+    """The events engineer's stateful per-topic decoder (roll-over state, counted drops)."""
+    from atsvo_ros.io.decode import EventDecoder
+
+    return EventDecoder(msgtype, ros_version)
+
+
+class Bag:
+    """A bag opened for streaming. Use as a context manager.
+
+    Args:
+        path: ROS 1 .bag, ROS 2 bag directory, or .mcap/.db3 file.
+        topics: explicit role -> topic names (e.g. ``{"rgb": "/cam/image"}``); they win.
+        config_topics: role -> topic from the configuration in use.
+        presets: bundled presets whose topic names are tried after the configuration's.
+    """
+
+    def __init__(self, path: str | Path, topics: dict[str, str | None] | None = None,
+                 config_topics: dict[str, str] | None = None, presets: Iterable[str] = PRESETS) -> None:
+        self.path = Path(path)
+        self._tmp = tempfile.TemporaryDirectory(prefix="atsvo_bag_")
+        try:
+            self.reader = open_any_reader(self.path, self._tmp.name)
+            self.reader.open()
+        except AtsvoError:
+            self._tmp.cleanup()
+            raise
+        except Exception as exc:
+            self._tmp.cleanup()
+            raise BagError(f"cannot open bag {self.path}: {exc}") from None
+        from atsvo_ros.io.msgtypes import register_event_types
+
+        self.ros_version = 2 if self.reader.is2 else 1
+        register_event_types(self.reader.typestore, self.ros_version)
+        self.topic_types = {c.topic: c.msgtype for c in self.reader.connections}
+        self.selection = resolve_topics(self.topic_types, topics, config_topics, presets)
+        self.event_decoders: dict[str, Any] = {}  # topic -> EventDecoder (its .stats count drops)
+
+    # -- context manager / info
+    def __enter__(self) -> Bag:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if getattr(self, "reader", None) is not None and self.reader.stack:
+            self.reader.close()
+        self._tmp.cleanup()
+
+    @property
+    def start_ns(self) -> int:
+        return int(self.reader.start_time)
+
+    @property
+    def end_ns(self) -> int:
+        return int(self.reader.end_time)
+
+    @property
+    def duration_s(self) -> float:
+        return max(0.0, (self.end_ns - self.start_ns) * 1e-9)
+
+    def message_count(self, role: str) -> int:
+        topic = getattr(self.selection, role)
+        return sum(c.msgcount for c in self.reader.connections if c.topic == topic) if topic else 0
+
+    def require(self, *roles: str) -> None:
+        """BagError naming the first missing role and the topics that are there."""
+        for role in roles:
+            if not getattr(self.selection, role):
+                have = ", ".join(f"{t} [{m}]" for t, m in sorted(self.topic_types.items())) or "no topics"
+                raise BagError(f"bag {self.path} has no {role} topic (pass --{role.replace('_', '-')}-topic); "
+                               f"it has: {have}")
+
+    # -- streaming
+    def messages(self, roles: Iterable[str] = ROLES) -> Iterator[BagMessage]:
+        """Messages of the chosen topics for ``roles``, merged in bag (receive) time order."""
+        by_topic = {t: r for r, t in self.selection.items() if r in set(roles)}
+        conns = [c for c in self.reader.connections if c.topic in by_topic]
+        if not conns:
+            return
+        rank = {t: (ROLES.index(r), t) for t, r in by_topic.items()}
+        group: list[tuple[Any, int, Any]] = []
+        for item in self._raw(conns):
+            if group and item[1] != group[0][1]:
+                yield from self._emit(group, by_topic, rank)
+                group = []
+            group.append(item)
+        yield from self._emit(group, by_topic, rank)
+
+    def _raw(self, conns: list[Any]) -> Iterator[tuple[Any, int, Any]]:
+        it = self.reader.messages(connections=conns)
+        while True:
+            try:
+                yield next(it)
+            except StopIteration:
+                return
+            except AtsvoError:
+                raise
+            except Exception as exc:
+                raise BagError(f"bag {self.path} is corrupt or truncated: {exc}") from None
+
+    def _emit(self, group: list[tuple[Any, int, Any]], by_topic: dict[str, str],
+              rank: dict[str, tuple[int, str]]) -> Iterator[BagMessage]:
+        """Messages sharing one timestamp, in role order: the stream does not depend on the container."""
+        if len(group) > 1:
+            group.sort(key=lambda item: rank[item[0].topic])  # stable: per-topic order is kept
+        for conn, t_ns, raw in group:
+            role = by_topic[conn.topic]
+            try:
+                if role == "events":
+                    if conn.topic not in self.event_decoders:
+                        self.event_decoders[conn.topic] = _event_decoder(conn.msgtype, self.ros_version)
+                    yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns),
+                                     events=self.event_decoders[conn.topic].decode_raw(raw))
+                else:
+                    yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns),
+                                     msg=self.reader.deserialize(raw, conn.msgtype))
+            except AtsvoError:
+                raise
+            except Exception as exc:
+                raise BagError(f"cannot decode a {conn.msgtype} message on {conn.topic} "
+                               f"at {t_ns * 1e-9:.3f} s: {exc}") from None
+
+
+# ---------------------------------------------------------------------------- poses and TF
+
+
+def pose_from_msg(msg: Any) -> np.ndarray:
+    """4x4 pose from a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped."""
+    from atsvo_ros.core.geometry import pose_from_tq
+
+    if hasattr(msg, "transform"):
+        tr, q = msg.transform.translation, msg.transform.rotation
+    else:
+        pose = msg.pose
+        pose = getattr(pose, "pose", pose)  # *WithCovariance / Odometry
+        tr, q = pose.position, pose.orientation
+    return pose_from_tq(np.array([tr.x, tr.y, tr.z]), np.array([q.x, q.y, q.z, q.w]))
+
+
+class StaticTf:
+    """Static transforms from /tf_static, composed along the frame tree on request."""
+
+    def __init__(self) -> None:
+        self.edges: dict[str, dict[str, np.ndarray]] = {}
+
+    def add(self, msg: Any) -> None:
+        for tf in msg.transforms:
+            parent, child = tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")
+            T = pose_from_msg(tf)
+            self.edges.setdefault(parent, {})[child] = T
+            inv = np.linalg.inv(T)
+            self.edges.setdefault(child, {})[parent] = inv
+
+    def lookup(self, target: str, source: str) -> np.ndarray | None:
+        """``T_target_source`` by breadth-first search over the tree (None when not connected)."""
+        target, source = target.lstrip("/"), source.lstrip("/")
+        if target == source:
+            return np.eye(4)
+        frontier = [(target, np.eye(4))]
+        seen = {target}
+        while frontier:
+            nxt = []
+            for frame, T in frontier:
+                for child, T_fc in self.edges.get(frame, {}).items():
+                    if child in seen:
+                        continue
+                    T_tc = T @ T_fc
+                    if child == source:
+                        return T_tc
+                    seen.add(child)
+                    nxt.append((child, T_tc))
+            frontier = nxt
+        return None
+
+
+__all__ = ["PRESETS", "ROLES", "Bag", "BagMessage", "StaticTf", "TopicSelection", "open_any_reader",
+           "pose_from_msg", "preset_topics", "resolve_topics"]
