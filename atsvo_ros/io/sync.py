@@ -1,0 +1,191 @@
+"""FrameAssembler: pair colour and depth images by stamp and cut the event stream at frame stamps.
+
+ROS-free and incremental, so the replay tool and the ROS tracking node share it: feed images and
+event batches in arrival order (any interleaving), collect ``(RgbdFrame, EventBatch)`` pairs as
+they become complete. A colour image is paired with the nearest depth image within
+``rig.sync_tolerance_s`` once no nearer depth can still arrive; unpaired images are dropped and
+counted. With events enabled, a pair is released once the event stream has advanced to its stamp,
+together with every event in ``(previous frame stamp, frame stamp]``; if the event stream stalls for
+more than ``max_event_wait_s`` beyond a waiting frame, the frame is released with what has arrived
+(counted), so a silent event camera never blocks tracking.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from atsvo_ros.config import RigConfig
+from atsvo_ros.core.events import EventBatch
+
+
+def _frame_class() -> Any:
+    from atsvo_ros.core.odometry import RgbdFrame
+
+    return RgbdFrame
+
+
+@dataclass
+class SyncStats:
+    """What the assembler had to drop or release early."""
+
+    frames: int = 0
+    dropped_rgb: int = 0
+    dropped_depth: int = 0
+    released_without_events: int = 0
+    late_events: int = 0
+
+
+class FrameAssembler:
+    """Incremental RGB/depth pairing and event cutting (see the module docstring)."""
+
+    def __init__(self, rig: RigConfig, with_events: bool = True, max_event_wait_s: float = 0.25,
+                 max_pending: int = 30) -> None:
+        self.rig = rig
+        self.with_events = with_events
+        self.tol_ns = int(round(rig.sync_tolerance_s * 1e9))
+        self.max_wait_ns = int(round(max_event_wait_s * 1e9))
+        self.max_pending = max_pending
+        self.stats = SyncStats()
+        self._rgb: deque[tuple[int, np.ndarray]] = deque()
+        self._depth: deque[tuple[int, np.ndarray]] = deque()
+        self._pairs: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
+        self._events: list[EventBatch] = []
+        self._event_mark_ns: int | None = None  # the event stream is complete up to here
+        self._last_cut_ns: int | None = None
+        self._newest_ns = -(2**63)
+
+    # ------------------------------------------------------------------ input
+    def add_rgb(self, stamp_ns: int, rgb: np.ndarray) -> None:
+        """A colour (H, W, 3 RGB uint8) or grey image at its header stamp."""
+        self._insert(self._rgb, int(stamp_ns), rgb)
+        self._match()
+
+    def add_depth(self, stamp_ns: int, depth_m: np.ndarray) -> None:
+        """A depth image in float32 metres (0 = invalid) aligned to the colour image."""
+        self._insert(self._depth, int(stamp_ns), depth_m)
+        self._match()
+
+    def add_rgb_msg(self, msg: Any) -> None:
+        """sensor_msgs/Image or CompressedImage (rclpy or rosbags)."""
+        from atsvo_ros.io.images import colour_from_msg, stamp_ns
+
+        self.add_rgb(stamp_ns(msg), colour_from_msg(msg))
+
+    def add_depth_msg(self, msg: Any) -> None:
+        """Depth image message: 16UC1 scaled by ``rig.depth_scale_m``, 32FC1 metres, range-checked."""
+        from atsvo_ros.io.images import depth_from_msg, stamp_ns
+
+        self.add_depth(stamp_ns(msg), depth_from_msg(msg, self.rig.depth_scale_m, self.rig.depth_min_m,
+                                                     self.rig.depth_max_m))
+
+    def add_events(self, batch: EventBatch, complete_to_ns: int | None = None) -> None:
+        """Events in time order; ``complete_to_ns`` (e.g. the message stamp) says the stream reached it."""
+        if len(batch):
+            if self._last_cut_ns is not None and batch.t_first_ns <= self._last_cut_ns:
+                late = batch.t <= self._last_cut_ns
+                self.stats.late_events += int(np.count_nonzero(late))
+                batch = batch.select(~late)
+            if len(batch):
+                self._events.append(batch)
+        mark = max(batch.t_last_ns if len(batch) else -(2**63), complete_to_ns if complete_to_ns is not None
+                   else -(2**63))
+        if mark > -(2**63):
+            self._event_mark_ns = mark if self._event_mark_ns is None else max(self._event_mark_ns, mark)
+            self._newest_ns = max(self._newest_ns, mark)
+
+    # ------------------------------------------------------------------ output
+    def pop_ready(self) -> list[tuple[Any, EventBatch]]:
+        """Complete frames (oldest first) with the events since the previous frame."""
+        out = []
+        while self._pairs:
+            t = self._pairs[0][0]
+            if self.with_events:
+                mark = self._event_mark_ns
+                complete = mark is not None and mark >= t
+                stalled = self._newest_ns - t > self.max_wait_ns or len(self._pairs) > self.max_pending
+                if not (complete or stalled):
+                    break
+                if not complete:
+                    self.stats.released_without_events += 1
+            out.append(self._release())
+        return out
+
+    def flush(self) -> list[tuple[Any, EventBatch]]:
+        """End of stream: release every paired frame with the events that arrived."""
+        self._match(final=True)
+        out = []
+        while self._pairs:
+            if self.with_events and (self._event_mark_ns is None or self._event_mark_ns < self._pairs[0][0]):
+                self.stats.released_without_events += 1
+            out.append(self._release())
+        self.stats.dropped_rgb += len(self._rgb)
+        self.stats.dropped_depth += len(self._depth)
+        self._rgb.clear()
+        self._depth.clear()
+        return out
+
+    @property
+    def pending(self) -> int:
+        """Images and pairs held back (bounded)."""
+        return len(self._rgb) + len(self._depth) + len(self._pairs)
+
+    # ------------------------------------------------------------------ internals
+    def _insert(self, q: deque, t: int, img: np.ndarray) -> None:
+        self._newest_ns = max(self._newest_ns, t)
+        if q and q[-1][0] > t:  # out of order: keep the queue sorted
+            items = sorted([*q, (t, img)], key=lambda x: x[0])
+            q.clear()
+            q.extend(items)
+        else:
+            q.append((t, img))
+
+    def _match(self, final: bool = False) -> None:
+        while self._rgb and self._depth:
+            t_r, rgb = self._rgb[0]
+            # depth images too old for this (and hence every later) colour image
+            while self._depth and self._depth[0][0] < t_r - self.tol_ns:
+                self._depth.popleft()
+                self.stats.dropped_depth += 1
+            if not self._depth:
+                break
+            t_d0 = self._depth[0][0]
+            if t_d0 > t_r + self.tol_ns:
+                self._rgb.popleft()  # no depth near this colour image will come any more
+                self.stats.dropped_rgb += 1
+                continue
+            stamps = np.fromiter((d[0] for d in self._depth), np.int64, len(self._depth))
+            k = int(np.argmin(np.abs(stamps - t_r)))
+            nearer_may_come = stamps[-1] < t_r and not final
+            if nearer_may_come and len(self._rgb) <= self.max_pending:
+                break
+            for _ in range(k):
+                self._depth.popleft()
+                self.stats.dropped_depth += 1
+            _, depth = self._depth.popleft()
+            self._rgb.popleft()
+            self._pairs.append((t_r, rgb, depth))
+        while len(self._rgb) > self.max_pending:
+            self._rgb.popleft()
+            self.stats.dropped_rgb += 1
+        while len(self._depth) > self.max_pending:
+            self._depth.popleft()
+            self.stats.dropped_depth += 1
+
+    def _release(self) -> tuple[Any, EventBatch]:
+        t, rgb, depth = self._pairs.popleft()
+        events = EventBatch.empty()
+        if self._events:
+            allev = EventBatch.concatenate(self._events) if len(self._events) > 1 else self._events[0]
+            k = int(np.searchsorted(allev.t, t, side="right"))
+            events = allev.select(slice(0, k))
+            rest = allev.select(slice(k, None))
+            self._events = [rest] if len(rest) else []
+        self._last_cut_ns = t
+        self.stats.frames += 1
+        return _frame_class()(stamp_ns=t, rgb=rgb, depth_m=depth), events
+
+
+__all__ = ["FrameAssembler", "SyncStats"]

@@ -1,0 +1,119 @@
+"""FrameAssembler: RGB/depth pairing by stamp and event cutting at frame stamps, fed incrementally."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from atsvo_ros.config import RigConfig
+from atsvo_ros.core.events import EventBatch
+from atsvo_ros.io import sync
+from atsvo_ros.io.sync import FrameAssembler
+
+MS = 1_000_000
+
+
+@dataclass(frozen=True)
+class _FrameDouble:  # test double, used only if the core's RgbdFrame is not importable
+    stamp_ns: int
+    rgb: np.ndarray
+    depth_m: np.ndarray
+
+
+@pytest.fixture(autouse=True)
+def _frame_class(monkeypatch):
+    try:
+        from atsvo_ros.core.odometry import RgbdFrame  # noqa: F401
+    except ImportError:
+        monkeypatch.setattr(sync, "_frame_class", lambda: _FrameDouble)
+
+
+def _img(v: int) -> np.ndarray:
+    return np.full((2, 2), v, np.uint8)
+
+
+def _dep(v: float) -> np.ndarray:
+    return np.full((2, 2), v, np.float32)
+
+
+def _events(t0_ms: float, t1_ms: float, n: int = 10) -> EventBatch:
+    t = np.linspace(t0_ms * MS, t1_ms * MS, n, endpoint=False).astype(np.int64)
+    return EventBatch(np.zeros(n), np.zeros(n), t, np.ones(n))
+
+
+def test_pairs_nearest_depth_within_tolerance_and_drops_unmatched():
+    fa = FrameAssembler(RigConfig(sync_tolerance_s=0.005), with_events=False)
+    fa.add_rgb(100 * MS, _img(1))
+    fa.add_depth(98 * MS, _dep(1.0))
+    fa.add_depth(101 * MS, _dep(2.0))  # nearer, arrives later: must win
+    fa.add_rgb(133 * MS, _img(2))  # depth for it never comes
+    fa.add_rgb(166 * MS, _img(3))
+    fa.add_depth(166 * MS, _dep(3.0))
+    out = fa.pop_ready() + fa.flush()
+    assert [f.stamp_ns for f, _ in out] == [100 * MS, 166 * MS]
+    assert [float(f.depth_m[0, 0]) for f, _ in out] == [2.0, 3.0]
+    assert fa.stats.dropped_rgb == 1 and fa.stats.dropped_depth == 1
+
+
+def test_depth_arriving_before_or_after_colour_gives_same_pairs():
+    def run(depth_first: bool) -> list[tuple[int, float]]:
+        fa = FrameAssembler(RigConfig(), with_events=False)
+        out = []
+        for k in range(5):
+            t = k * 33 * MS
+            items = [lambda t=t, k=k: fa.add_rgb(t, _img(k)), lambda t=t, k=k: fa.add_depth(t + MS, _dep(k))]
+            for f in (items[::-1] if depth_first else items):
+                f()
+            out += fa.pop_ready()
+        out += fa.flush()
+        return [(f.stamp_ns, float(f.depth_m[0, 0])) for f, _ in out]
+
+    assert run(True) == run(False) == [(k * 33 * MS, float(k)) for k in range(5)]
+
+
+def test_events_cut_at_frame_stamps_and_frames_wait_for_events():
+    fa = FrameAssembler(RigConfig(), with_events=True)
+    all_t = np.concatenate([_events(0, 20).t, _events(20, 40).t, _events(40, 70).t])
+    fa.add_events(_events(0, 20))
+    fa.add_rgb(30 * MS, _img(0))
+    fa.add_depth(30 * MS, _dep(1))
+    assert fa.pop_ready() == []  # events only known up to ~20 ms
+    fa.add_events(_events(20, 40))
+    (f0, ev0), = fa.pop_ready()
+    assert f0.stamp_ns == 30 * MS and np.array_equal(ev0.t, all_t[all_t <= 30 * MS])
+    fa.add_rgb(60 * MS, _img(1))
+    fa.add_depth(60 * MS, _dep(1))
+    fa.add_events(_events(40, 70))
+    (f1, ev1), = fa.pop_ready()
+    assert np.array_equal(ev1.t, all_t[(all_t > 30 * MS) & (all_t <= 60 * MS)])
+    # every event is delivered once
+    rest = fa.flush()
+    assert rest == []
+
+
+def test_silent_event_camera_does_not_block():
+    fa = FrameAssembler(RigConfig(), with_events=True, max_event_wait_s=0.1)
+    for k in range(6):
+        fa.add_rgb(k * 33 * MS, _img(k))
+        fa.add_depth(k * 33 * MS, _dep(1))
+    got = fa.pop_ready()
+    assert 0 < len(got) < 6  # the older frames waited long enough
+    assert fa.stats.released_without_events == len(got)
+    assert len(got) + len(fa.flush()) == 6
+
+
+def test_complete_to_marks_progress_without_events():
+    fa = FrameAssembler(RigConfig(), with_events=True)
+    fa.add_rgb(10 * MS, _img(0))
+    fa.add_depth(10 * MS, _dep(1))
+    fa.add_events(EventBatch.empty(), complete_to_ns=12 * MS)  # an empty packet stamped after the frame
+    (f, ev), = fa.pop_ready()
+    assert len(ev) == 0 and fa.stats.released_without_events == 0
+
+
+def test_memory_is_bounded_when_depth_never_comes():
+    fa = FrameAssembler(RigConfig(), with_events=False, max_pending=10)
+    for k in range(100):
+        fa.add_rgb(k * 33 * MS, _img(0))
+    assert fa.pending <= 11 and fa.stats.dropped_rgb >= 89
