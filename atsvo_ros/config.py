@@ -95,6 +95,11 @@ class AtsConfig:
     blur_ksize: int = _f(3, 1, 31, doc="box blur kernel after Eq. 2 (1 = off)")
     median_ksize: int = _f(3, 1, 31, doc="median blur kernel after Eq. 2 (1 = off, odd)")
     constant_tau_s: float = _f(0.03, 0.0, 10.0, lo_open=True, doc="tau of the constant-tau baseline")
+    tau_mode: str = _f("mean_age", choices=("mean_age", "eq2_printed"),
+                       doc="mean_age: tau = clip(mean age of the n latest neighbours, tau_l, tau_u), decays faster "
+                           "under dense/fast events as the paper describes; eq2_printed: tau = max(tau_u - mean "
+                           "age, tau_l), Eq. 2 as printed (decays slower under dense/fast events)")
+    sits_radius_px: int = _f(3, 1, 10, doc="patch radius of the speed-invariant time surface baseline")
 
 
 @dataclass(frozen=True)
@@ -134,6 +139,12 @@ class TrackerConfig:
     motion_threshold_rot_deg: float = _f(3.0, 0.0, 180.0, doc="inter-frame rotation that activates event fusion")
     motion_threshold_trans_m: float = _f(0.05, 0.0, 10.0, doc="inter-frame translation that activates event fusion")
     min_inlier_fraction: float = _f(0.3, 0.0, 1.0, doc="below this the frame is lost")
+    min_inliers: int = _f(30, 6, 100000, doc="fewer inlier map points than this and the frame is lost")
+    affine_brightness: bool = _f(True, doc="estimate a per-frame gain/offset (auto-exposure), as DSO does")
+    max_step_m: float = _f(0.5, 0.0, 100.0, lo_open=True,
+                           doc="camera translation per frame beyond which the estimate counts as diverged")
+    max_step_rot_deg: float = _f(30.0, 0.0, 180.0, lo_open=True,
+                                 doc="camera rotation per frame beyond which the estimate counts as diverged")
 
 
 @dataclass(frozen=True)
@@ -145,6 +156,9 @@ class MappingConfig:
     min_tracked_fraction: float = _f(0.6, 0.0, 1.0, doc="tracked/selected ratio below which a keyframe is added")
     max_keyframes: int = _f(6, 1, 1000, doc="keyframes in the local map")
     max_points: int = _f(6000, 100, 10000000)
+    depth_edge_ratio: float = _f(0.05, 0.0, 10.0, lo_open=True,
+                                 doc="reject a point whose 3x3 depth range exceeds this share of its depth")
+    max_outlier_frames: int = _f(5, 1, 1000, doc="cull a map point after this many consecutive outlier frames")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,206 @@
+"""numba kernels of the tracker: residuals, Jacobians and normal equations of one residual block.
+
+Private: call them through :class:`atsvo_ros.core.tracker.ResidualBlock`.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# Point states written by _linearise.
+INVISIBLE = 0
+INLIER = 1
+OUTLIER = 2
+
+
+@njit(cache=True)
+def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, offset, huber, outlier_thr,
+               border, H, g, state):  # pragma: no cover - compiled
+    """Gauss-Newton system of the patch residuals ``r = I(pi(T_cr T_rw p) + o) - (gain z + offset)``.
+
+    Parameters are ``(xi, a, b)``: a left perturbation ``xi`` of ``T_rw`` (twist, translation first),
+    the log-gain ``a`` (gain = e^a) and offset ``b``. Fills ``H`` (8x8), ``g`` (8) with the
+    Huber-weighted ``J^T W J`` and ``J^T W r``, and ``state`` per point; returns
+    ``(energy, n_inliers, n_visible, sum of inlier squared residuals)``. Invisible points and
+    outliers add a constant energy so energies of different estimates stay comparable.
+    """
+    n = pts_w.shape[0]
+    npat = pattern.shape[0]
+    h = img.shape[0]
+    w = img.shape[1]
+    for i in range(8):
+        g[i] = 0.0
+        for j in range(8):
+            H[i, j] = 0.0
+    if outlier_thr > huber:
+        fixed = npat * (2.0 * huber * outlier_thr - huber * huber)
+    else:
+        fixed = npat * outlier_thr * outlier_thr
+    max_sse = npat * outlier_thr * outlier_thr
+    energy = 0.0
+    sse_in = 0.0
+    n_in = 0
+    n_vis = 0
+    res = np.empty(npat)
+    gxs = np.empty(npat)
+    gys = np.empty(npat)
+    zs = np.empty(npat)
+    Jg = np.empty((2, 6))
+    M = np.empty((2, 6))
+    # Rotation from the RGB camera to this block's camera.
+    R = T_cr[:3, :3]
+    for i in range(n):
+        X = pts_w[i, 0]
+        Y = pts_w[i, 1]
+        Z = pts_w[i, 2]
+        px = T_rw[0, 0] * X + T_rw[0, 1] * Y + T_rw[0, 2] * Z + T_rw[0, 3]
+        py = T_rw[1, 0] * X + T_rw[1, 1] * Y + T_rw[1, 2] * Z + T_rw[1, 3]
+        pz = T_rw[2, 0] * X + T_rw[2, 1] * Y + T_rw[2, 2] * Z + T_rw[2, 3]
+        qx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + T_cr[0, 3]
+        qy = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + T_cr[1, 3]
+        qz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + T_cr[2, 3]
+        if qz < 1e-3:
+            state[i] = INVISIBLE
+            energy += fixed
+            continue
+        iz = 1.0 / qz
+        u = fx * qx * iz + cx
+        v = fy * qy * iz + cy
+        if not (u >= border and v >= border and u <= w - 1 - border and v <= h - 1 - border):
+            state[i] = INVISIBLE
+            energy += fixed
+            continue
+        n_vis += 1
+        sse = 0.0
+        for k in range(npat):
+            x = u + pattern[k, 0]
+            y = v + pattern[k, 1]
+            x0 = int(x)
+            y0 = int(y)
+            ax = x - x0
+            ay = y - y0
+            w00 = (1.0 - ax) * (1.0 - ay)
+            w01 = ax * (1.0 - ay)
+            w10 = (1.0 - ax) * ay
+            w11 = ax * ay
+            iv = (w00 * img[y0, x0, 0] + w01 * img[y0, x0 + 1, 0]
+                  + w10 * img[y0 + 1, x0, 0] + w11 * img[y0 + 1, x0 + 1, 0])
+            gxs[k] = (w00 * img[y0, x0, 1] + w01 * img[y0, x0 + 1, 1]
+                      + w10 * img[y0 + 1, x0, 1] + w11 * img[y0 + 1, x0 + 1, 1])
+            gys[k] = (w00 * img[y0, x0, 2] + w01 * img[y0, x0 + 1, 2]
+                      + w10 * img[y0 + 1, x0, 2] + w11 * img[y0 + 1, x0 + 1, 2])
+            zs[k] = patches[i, k]
+            r = iv - (gain * zs[k] + offset)
+            res[k] = r
+            sse += r * r
+        if not (sse <= max_sse):
+            state[i] = OUTLIER
+            energy += fixed
+            continue
+        state[i] = INLIER
+        n_in += 1
+        sse_in += sse
+        # d(pixel)/d(q) (2x3) times R, then times [I, -hat(p)] for the left perturbation of T_rw.
+        a0 = fx * iz
+        a2 = -fx * qx * iz * iz
+        b1 = fy * iz
+        b2 = -fy * qy * iz * iz
+        B00 = a0 * R[0, 0] + a2 * R[2, 0]
+        B01 = a0 * R[0, 1] + a2 * R[2, 1]
+        B02 = a0 * R[0, 2] + a2 * R[2, 2]
+        B10 = b1 * R[1, 0] + b2 * R[2, 0]
+        B11 = b1 * R[1, 1] + b2 * R[2, 1]
+        B12 = b1 * R[1, 2] + b2 * R[2, 2]
+        Jg[0, 0] = B00
+        Jg[0, 1] = B01
+        Jg[0, 2] = B02
+        Jg[1, 0] = B10
+        Jg[1, 1] = B11
+        Jg[1, 2] = B12
+        # -hat(p) = [[0, pz, -py], [-pz, 0, px], [py, -px, 0]]
+        Jg[0, 3] = -B01 * pz + B02 * py
+        Jg[0, 4] = B00 * pz - B02 * px
+        Jg[0, 5] = -B00 * py + B01 * px
+        Jg[1, 3] = -B11 * pz + B12 * py
+        Jg[1, 4] = B10 * pz - B12 * px
+        Jg[1, 5] = -B10 * py + B11 * px
+        sxx = 0.0
+        sxy = 0.0
+        syy = 0.0
+        sxa = 0.0
+        sya = 0.0
+        sxb = 0.0
+        syb = 0.0
+        saa = 0.0
+        sab = 0.0
+        sbb = 0.0
+        sxr = 0.0
+        syr = 0.0
+        sar = 0.0
+        sbr = 0.0
+        for k in range(npat):
+            r = res[k]
+            ar = abs(r)
+            if ar <= huber:
+                wt = 1.0
+                energy += r * r
+            else:
+                wt = huber / ar
+                energy += 2.0 * huber * ar - huber * huber
+            gx = gxs[k]
+            gy = gys[k]
+            ja = -gain * zs[k]
+            sxx += wt * gx * gx
+            sxy += wt * gx * gy
+            syy += wt * gy * gy
+            sxa += wt * gx * ja
+            sya += wt * gy * ja
+            sxb -= wt * gx
+            syb -= wt * gy
+            saa += wt * ja * ja
+            sab -= wt * ja
+            sbb += wt
+            sxr += wt * gx * r
+            syr += wt * gy * r
+            sar += wt * ja * r
+            sbr -= wt * r
+        for c in range(6):
+            M[0, c] = sxx * Jg[0, c] + sxy * Jg[1, c]
+            M[1, c] = sxy * Jg[0, c] + syy * Jg[1, c]
+        for r6 in range(6):
+            j0 = Jg[0, r6]
+            j1 = Jg[1, r6]
+            for c in range(r6, 6):
+                H[r6, c] += j0 * M[0, c] + j1 * M[1, c]
+            H[r6, 6] += j0 * sxa + j1 * sya
+            H[r6, 7] += j0 * sxb + j1 * syb
+            g[r6] += j0 * sxr + j1 * syr
+        H[6, 6] += saa
+        H[6, 7] += sab
+        H[7, 7] += sbb
+        g[6] += sar
+        g[7] += sbr
+    for r8 in range(8):
+        for c in range(r8):
+            H[r8, c] = H[c, r8]
+    return energy, n_in, n_vis, sse_in
+
+
+@njit(cache=True)
+def _project_points(pts_w, T_cw, fx, fy, cx, cy):  # pragma: no cover - compiled
+    """Pixel positions (N, 2) and depths (N,) of world points in a pinhole camera."""
+    n = pts_w.shape[0]
+    uv = np.empty((n, 2))
+    z = np.empty(n)
+    for i in range(n):
+        X = pts_w[i, 0]
+        Y = pts_w[i, 1]
+        Z = pts_w[i, 2]
+        px = T_cw[0, 0] * X + T_cw[0, 1] * Y + T_cw[0, 2] * Z + T_cw[0, 3]
+        py = T_cw[1, 0] * X + T_cw[1, 1] * Y + T_cw[1, 2] * Z + T_cw[1, 3]
+        pz = T_cw[2, 0] * X + T_cw[2, 1] * Y + T_cw[2, 2] * Z + T_cw[2, 3]
+        z[i] = pz
+        iz = 1.0 / pz if pz > 1e-9 else 0.0
+        uv[i, 0] = fx * px * iz + cx
+        uv[i, 1] = fy * py * iz + cy
+    return uv, z

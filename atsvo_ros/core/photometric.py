@@ -1,0 +1,82 @@
+"""Residual patterns, bilinear sampling and robust weights for the photometric error of Eq. 4.
+
+A map point stores the intensities of a small pattern of pixels around it (``z_p`` in Eq. 4).
+The RGB term uses :data:`RGB_PATTERN` (p = 0..8: the pixel and its 8 neighbours, "the new pixel
+and adjacent pixels" of Section II-C); the ATS term of the fusion issue uses :data:`ATS_PATTERN`
+(q = 0..13). The paper does not draw either pattern; offsets are in pixels of the pyramid level
+the pattern is sampled on, so a pattern covers the same share of the scene on every level.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: 9-pixel RGB residual pattern (dx, dy): the 3x3 neighbourhood, centre first.
+RGB_PATTERN = np.array([(0, 0), (-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)],
+                       dtype=np.float32)
+
+#: 14-pixel ATS residual pattern (dx, dy): centre, 8 neighbours, the 4 axial pixels at distance 2
+#: and one diagonal at distance 2. ATS images are smooth, so a wider footprint widens the basin of
+#: convergence; 14 pixels (odd count impossible to make point-symmetric with the centre) as stated.
+ATS_PATTERN = np.array([(0, 0), (-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1),
+                        (0, -2), (-2, 0), (2, 0), (0, 2), (2, 2)], dtype=np.float32)
+
+#: Pixels a pattern reaches from its centre (the tracker keeps projections this far inside).
+RGB_PATTERN_RADIUS_PX = 1
+ATS_PATTERN_RADIUS_PX = 2
+
+
+def bilinear(image: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sample a single-channel image at sub-pixel positions (N, 2) (x, y).
+
+    Returns ``(values float32, valid)``; positions whose 2x2 support leaves the image are invalid
+    and read 0.
+    """
+    img = np.asarray(image, dtype=np.float32)
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    h, w = img.shape[:2]
+    x, y = uv[:, 0], uv[:, 1]
+    valid = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x <= w - 1) & (y <= h - 1)
+    xs = np.where(valid, x, 0.0)
+    ys = np.where(valid, y, 0.0)
+    x0 = np.minimum(np.floor(xs).astype(np.int64), w - 2 if w > 1 else 0)
+    y0 = np.minimum(np.floor(ys).astype(np.int64), h - 2 if h > 1 else 0)
+    fx = (xs - x0).astype(np.float32)
+    fy = (ys - y0).astype(np.float32)
+    x1 = np.minimum(x0 + 1, w - 1)
+    y1 = np.minimum(y0 + 1, h - 1)
+    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
+    bot = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
+    out = (top * (1 - fy) + bot * fy).astype(np.float32)
+    out[~valid] = 0.0
+    return out, valid
+
+
+def sample_patches(image: np.ndarray, uv: np.ndarray, pattern: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Intensities of ``pattern`` around each position: ``(N, P)`` float32 and a per-point validity mask."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    pat = np.asarray(pattern, dtype=np.float64).reshape(-1, 2)
+    pos = uv[:, None, :] + pat[None, :, :]
+    vals, valid = bilinear(image, pos.reshape(-1, 2))
+    return vals.reshape(len(uv), len(pat)), valid.reshape(len(uv), len(pat)).all(axis=1)
+
+
+def level_position(uv0: np.ndarray, level: int) -> np.ndarray:
+    """Pixel position on pyramid ``level`` of level-0 positions (pixel-centre convention of build_pyramid)."""
+    s = 0.5 ** level
+    return (np.asarray(uv0, dtype=np.float64) + 0.5) * s - 0.5
+
+
+def huber_weight(r: np.ndarray, delta: float) -> np.ndarray:
+    """IRLS weight of the Huber loss: 1 inside ``delta``, ``delta / |r|`` outside."""
+    a = np.abs(np.asarray(r, dtype=np.float64))
+    return np.where(a <= delta, 1.0, delta / np.maximum(a, 1e-12))
+
+
+def huber_energy(r: np.ndarray, delta: float) -> np.ndarray:
+    """Huber loss scaled like a squared error: ``r^2`` inside ``delta``, ``2 delta |r| - delta^2`` outside."""
+    a = np.abs(np.asarray(r, dtype=np.float64))
+    return np.where(a <= delta, a * a, 2.0 * delta * a - delta * delta)
+
+
+__all__ = ["ATS_PATTERN", "ATS_PATTERN_RADIUS_PX", "RGB_PATTERN", "RGB_PATTERN_RADIUS_PX", "bilinear",
+           "huber_energy", "huber_weight", "level_position", "sample_patches"]
