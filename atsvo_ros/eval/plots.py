@@ -1,0 +1,118 @@
+"""Matplotlib (Agg) figures of a run: paths, position and roll/pitch/yaw over time, errors over time.
+
+Every function writes PNG files into a directory and returns their paths; nothing is shown on
+screen, so the plots work on headless machines and in CI.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from atsvo_ros.eval.metrics import EvalResult
+from atsvo_ros.io.trajectory import Trajectory
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def rpy_deg(T: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (ZYX, degrees, unwrapped over time) of (N, 4, 4) poses."""
+    R = T[:, :3, :3]
+    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
+    pitch = np.arcsin(np.clip(-R[:, 2, 0], -1.0, 1.0))
+    yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
+    return np.degrees(np.unwrap(np.stack([roll, pitch, yaw], 1), axis=0))
+
+
+def _series(est: Trajectory, result: EvalResult | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
+    """Time (s from start), estimate poses, matched GT poses (or None) and the start stamp."""
+    if result is not None:
+        t0 = int(result.stamps_ns[0])
+        return (result.stamps_ns - t0) * 1e-9, result.T_w_est, result.T_w_gt, t0
+    t0 = int(est.stamps_ns[0]) if len(est) else 0
+    return (est.stamps_ns - t0) * 1e-9, est.T_w_b, None, t0
+
+
+def plot_run(out_dir: str | Path, est: Trajectory, result: EvalResult | None = None,
+             title: str = "") -> list[Path]:
+    """Write trajectory.png (top + side view), position.png, orientation.png and, with ground
+    truth, error.png; returns the written paths."""
+    plt = _plt()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t, P, G, _ = _series(est, result)
+    paths: list[Path] = []
+    label_est = "estimate (aligned)" if result is not None else "estimate"
+    div_t = result.metrics.get("diverged_at_s") if result is not None else None
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+    for ax, (i, j, name) in zip(axes, ((0, 1, "top view (x-y)"), (0, 2, "side view (x-z)"))):
+        if G is not None:
+            ax.plot(G[:, i, 3], G[:, j, 3], "k-", lw=1.5, label="ground truth")
+        ax.plot(P[:, i, 3], P[:, j, 3], "-", color="tab:red", lw=1.0, label=label_est)
+        if len(P):
+            ax.plot(P[0, i, 3], P[0, j, 3], "o", color="tab:green", label="start")
+        ax.set_xlabel("xyz"[i] + " [m]")
+        ax.set_ylabel("xyz"[j] + " [m]")
+        ax.set_title(name)
+        ax.axis("equal")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8)
+    fig.suptitle(title or "trajectory")
+    fig.tight_layout()
+    paths.append(out / "trajectory.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    for name, values, unit, labels in (("position", lambda T: T[:, :3, 3], "m", "xyz"),
+                                       ("orientation", rpy_deg, "deg", ("roll", "pitch", "yaw"))):
+        fig, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+        ve = values(P) if len(P) else np.zeros((0, 3))
+        vg = values(G) if G is not None and len(G) else None
+        for k, ax in enumerate(axes):
+            if vg is not None:
+                ax.plot(t, vg[:, k], "k-", lw=1.2, label="ground truth")
+            ax.plot(t, ve[:, k], "-", color="tab:red", lw=1.0, label=label_est)
+            if div_t is not None:
+                ax.axvline(div_t, color="tab:orange", ls="--", label="diverged")
+            ax.set_ylabel(f"{labels[k]} [{unit}]")
+            ax.grid(True, alpha=0.3)
+        axes[0].legend(loc="best", fontsize=8)
+        axes[-1].set_xlabel("time [s]")
+        fig.suptitle(f"{title} {name}".strip())
+        fig.tight_layout()
+        paths.append(out / f"{name}.png")
+        fig.savefig(paths[-1], dpi=110)
+        plt.close(fig)
+
+    if result is not None:
+        fig, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+        axes[0].plot(t, result.position_errors_m * 100.0, color="tab:red")
+        axes[0].set_ylabel("position error [cm]")
+        tm = t[1:] if len(t) > 1 else t
+        axes[1].plot(tm, result.rpe_rot_deg, color="tab:blue")
+        axes[1].set_ylabel("RPE rot [deg/f]")
+        axes[2].plot(tm, result.rpe_trans_m * 100.0, color="tab:purple")
+        axes[2].set_ylabel("RPE trans [cm/f]")
+        for ax in axes:
+            if div_t is not None:
+                ax.axvline(div_t, color="tab:orange", ls="--")
+            ax.grid(True, alpha=0.3)
+        axes[-1].set_xlabel("time [s]")
+        m = result.metrics
+        fig.suptitle(f"{title} ATE {m['ate_rmse_m'] * 100:.2f} cm".strip())
+        fig.tight_layout()
+        paths.append(out / "error.png")
+        fig.savefig(paths[-1], dpi=110)
+        plt.close(fig)
+    return paths
+
+
+__all__ = ["plot_run", "rpy_deg"]
