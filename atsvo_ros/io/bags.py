@@ -313,6 +313,24 @@ class Bag:
             group.append(item)
         yield from self._emit(group, by_topic, rank)
 
+    def first_messages(self, roles: Iterable[str]) -> dict[str, Any]:
+        """The first deserialized message of each role present (reads only until all are found)."""
+        by_topic = {t: r for r, t in self.selection.items() if r in set(roles)}
+        conns = [c for c in self.reader.connections if c.topic in by_topic]
+        found: dict[str, Any] = {}
+        if not conns:
+            return found
+        for conn, _, raw in self._raw(conns):
+            role = by_topic[conn.topic]
+            if role not in found:
+                try:
+                    found[role] = self.reader.deserialize(raw, conn.msgtype)
+                except Exception as exc:
+                    raise BagError(f"cannot decode a {conn.msgtype} message on {conn.topic}: {exc}") from None
+            if len(found) == len(by_topic):
+                break
+        return found
+
     def _raw(self, conns: list[Any]) -> Iterator[tuple[Any, int, Any]]:
         it = self.reader.messages(connections=conns)
         while True:

@@ -18,7 +18,8 @@ def _main(args: argparse.Namespace) -> int:
     from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics
     from atsvo_ros.io.trajectory import read_tum
 
-    opts = EvalOptions(align=args.align, align_s=args.align_s, max_diff_s=args.t_max_diff, delta_deg=args.delta_deg)
+    opts = EvalOptions(align=args.align, align_s=args.align_s, max_diff_s=args.t_max_diff, delta_deg=args.delta_deg,
+                       interpolate_gt=args.interpolate)
     gt, est = read_tum(args.gt), read_tum(args.est)
     result = evaluate(gt, est, opts)
     print(format_metrics(result.metrics))
@@ -48,6 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="paper alignment: seconds of matched poses used for the SE(3) step (default 2)")
     parser.add_argument("--t-max-diff", type=float, default=0.01,
                         help="max stamp difference when associating poses, seconds (default 0.01, like evo)")
+    parser.add_argument("--interpolate", action="store_true",
+                        help="interpolate ground truth at the estimate stamps (pairs stay the same)")
     parser.add_argument("--delta-deg", type=float, default=1.0,
                         help="ground-truth rotation per segment for the per-degree RPE (default 1)")
     parser.add_argument("--out", help="directory for metrics.json and plots")

@@ -1,0 +1,286 @@
+"""``atsvo-replay BAG --out DIR``: run the odometry pipeline over a recorded bag, offline, without ROS.
+
+Exactly the core the ROS node runs (:class:`atsvo_ros.core.odometry.Odometry` fed by the same
+:class:`~atsvo_ros.io.sync.FrameAssembler`), deterministic, streaming (memory does not grow with
+the bag). Writes DIR/trajectory.tum (robot base pose, or the colour optical frame with ``--frame
+camera``), DIR/timing.json (per-frame tracking time, mode, status), DIR/metrics.json when ground
+truth is available (the bag's pose topic or ``--gt``), and PNG plots.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.errors import BagError, ConfigError
+from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
+
+TOPIC_FLAGS = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")
+
+
+@dataclass
+class ReplayResult:
+    """What a replay produced (also written to the output directory)."""
+
+    out_dir: Path
+    mode: str
+    stamps_ns: np.ndarray
+    T_odom_x: np.ndarray
+    statuses: list[str]
+    tracking_time_s: np.ndarray
+    wall_time_s: float
+    bag_duration_s: float
+    metrics: dict[str, Any] | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def real_time_factor(self) -> float:
+        """Sequence time over wall time (> 1 is faster than real time)."""
+        span = (self.stamps_ns[-1] - self.stamps_ns[0]) * 1e-9 if len(self.stamps_ns) > 1 else 0.0
+        return span / self.wall_time_s if self.wall_time_s > 0 else float("inf")
+
+
+def detect_preset(topics: dict[str, str]) -> str:
+    """``mvsec`` for MVSEC topic names, else ``mini_cheetah`` (the robot and the simulator's layout)."""
+    return "mvsec" if any(t.startswith("/davis/left/") for t in topics) else "mini_cheetah"
+
+
+def _with_rig(cfg: AtsvoConfig, **rig: Any) -> AtsvoConfig:
+    return dataclasses.replace(cfg, rig=dataclasses.replace(cfg.rig, **rig))
+
+
+def _flat(T: np.ndarray) -> tuple[float, ...]:
+    return tuple(float(v) for v in np.asarray(T).reshape(-1))
+
+
+def _cameras(cfg: AtsvoConfig, first: dict[str, Any], notes: list[str]):
+    """Colour / event camera models: camera_info when present and allowed, else the config."""
+    from atsvo_ros.core.camera import CameraModel
+
+    rgb_cam = cfg.rgb_camera.model()
+    if cfg.rgb_camera.use_camera_info and "rgb_info" in first:
+        rgb_cam = CameraModel.from_camera_info(first["rgb_info"])
+        notes.append("colour intrinsics from camera_info")
+    ev_cam = cfg.event_camera.model()
+    if cfg.event_camera.use_camera_info and "event_info" in first:
+        ev_cam = CameraModel.from_camera_info(first["event_info"])
+    return rgb_cam, ev_cam
+
+
+def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[str]) -> AtsvoConfig:
+    """T_base_rgb / T_rgb_event from /tf_static when it connects the frames, else the config."""
+    from atsvo_ros.io.bags import StaticTf
+
+    if "tf_static" not in first:
+        return cfg
+    tf = StaticTf()
+    for m in bag.messages(["tf_static"]):
+        tf.add(m.msg)
+    updates: dict[str, Any] = {}
+    rgb_frame = first["rgb"].header.frame_id if "rgb" in first else ""
+    if rgb_frame:
+        T = tf.lookup(cfg.topics.base_frame, rgb_frame)
+        if T is not None:
+            updates["T_base_rgb"] = _flat(T)
+            notes.append(f"T_base_rgb from /tf_static ({cfg.topics.base_frame} -> {rgb_frame})")
+    ev_frame = first["events"].header.frame_id if "events" in first else ""
+    if rgb_frame and ev_frame:
+        T = tf.lookup(rgb_frame, ev_frame)
+        if T is not None:
+            updates["T_rgb_event"] = _flat(T)
+            notes.append(f"T_rgb_event from /tf_static ({rgb_frame} -> {ev_frame})")
+    return _with_rig(cfg, **updates) if updates else cfg
+
+
+def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None = None, *,
+           mode: str | None = None, gt_path: str | Path | None = None, frame: str = "base",
+           topics: dict[str, str | None] | None = None, plots: bool = True, progress: bool | None = None,
+           odometry_factory: Callable[..., Any] | None = None, eval_options: Any = None) -> ReplayResult:
+    """Replay one bag through the odometry and write the outputs (see the module docstring).
+
+    ``config=None`` picks the preset from the bag's topics; ``mode`` defaults to ``config.mode``;
+    ``odometry_factory(config, rgb_camera, event_camera)`` defaults to the core's ``Odometry``.
+    """
+    from tqdm import tqdm
+
+    from atsvo_ros.config import load_config
+    from atsvo_ros.io.bags import Bag, pose_from_msg
+    from atsvo_ros.io.images import stamp_ns
+    from atsvo_ros.io.sync import FrameAssembler
+    from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
+
+    if frame not in ("base", "camera"):
+        raise ConfigError(f"--frame must be base or camera, got {frame!r}")
+    out = Path(out_dir)
+    notes: list[str] = []
+    gt_file = read_tum(gt_path) if gt_path else None
+    with Bag(bag_path, topics=topics, config_topics=vars(config.topics) if config else None) as bag:
+        if config is None:
+            preset = detect_preset(bag.topic_types)
+            config = load_config(preset)
+            notes.append(f"config preset {preset} (from the bag's topics)")
+        mode = mode or config.mode
+        if mode not in ("fused", "rgbd"):
+            raise ConfigError(f"--mode must be fused or rgbd, got {mode!r}")
+        bag.require("rgb", "depth")
+        if odometry_factory is None:
+            from atsvo_ros.core.odometry import Odometry
+
+            odometry_factory = Odometry
+        supports_events = bool(getattr(odometry_factory, "supports_events", False))
+        use_events = mode == "fused" and bag.selection.events is not None and supports_events
+        if mode == "fused" and not use_events:
+            notes.append("RGB-D only: " + ("the bag has no event topic" if bag.selection.events is None
+                                           else "the odometry core does not fuse events yet"))
+        first = bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events"])
+        config = _extrinsics(config, bag, first, notes)
+        rgb_cam, ev_cam = _cameras(config, first, notes)
+        odom = odometry_factory(config, rgb_cam, ev_cam if use_events else None)
+        assembler = FrameAssembler(config.rig, with_events=use_events)
+        roles = ["rgb", "depth"] + (["events"] if use_events else []) + \
+            (["ground_truth"] if gt_file is None and bag.selection.ground_truth else [])
+        stamps: list[int] = []
+        poses: list[np.ndarray] = []
+        statuses: list[str] = []
+        frames_info: list[dict[str, Any]] = []
+        gt_stamps: list[int] = []
+        gt_poses: list[np.ndarray] = []
+        t_wall0 = time.perf_counter()
+        bar = tqdm(total=bag.message_count("rgb"), unit="frame", desc="replay",
+                   disable=None if progress is None else not progress, leave=False)
+
+        def process(pairs: list) -> None:
+            for fr, events in pairs:
+                if use_events and len(events):
+                    odom.add_events(events)
+                res = odom.process_frame(fr)
+                stamps.append(int(res.stamp_ns))
+                poses.append(np.asarray(res.T_odom_base if frame == "base" else res.T_odom_camera, dtype=np.float64))
+                status = getattr(res.status, "value", str(res.status))
+                statuses.append(status)
+                frames_info.append({"stamp_ns": int(res.stamp_ns), "tracking_time_s": float(res.tracking_time_s),
+                                    "mode": res.mode, "status": status, "n_points": int(res.n_points),
+                                    "n_inliers": int(res.n_inliers), "keyframe": bool(res.keyframe_inserted),
+                                    "n_events": int(len(events))})
+                wall = time.perf_counter() - t_wall0
+                span = (stamps[-1] - stamps[0]) * 1e-9
+                bar.update(1)
+                bar.set_postfix(rtf=f"{span / wall:.2f}" if wall > 0 else "-", status=status, refresh=False)
+
+        for m in bag.messages(roles):
+            if m.role == "rgb":
+                assembler.add_rgb_msg(m.msg)
+            elif m.role == "depth":
+                assembler.add_depth_msg(m.msg)
+            elif m.role == "events":
+                assembler.add_events(m.events)
+            elif m.role == "ground_truth":
+                gt_stamps.append(stamp_ns(m.msg))
+                gt_poses.append(pose_from_msg(m.msg))
+            process(assembler.pop_ready())
+        process(assembler.flush())
+        bar.close()
+        wall = time.perf_counter() - t_wall0
+        bag_duration = bag.duration_s
+        sync_stats = dataclasses.asdict(assembler.stats)
+        dec_stats = {t: d.stats.as_dict() for t, d in bag.event_decoders.items() if hasattr(d, "stats")}
+    if not stamps:
+        raise BagError(f"no colour/depth pair could be formed from {bag_path} (sync tolerance "
+                       f"{config.rig.sync_tolerance_s} s; dropped {sync_stats['dropped_rgb']} colour and "
+                       f"{sync_stats['dropped_depth']} depth images)")
+    used_mode = "fused" if use_events else "rgbd"
+    result = ReplayResult(out, used_mode, np.asarray(stamps, np.int64), np.stack(poses), statuses,
+                          np.array([f["tracking_time_s"] for f in frames_info]), wall, bag_duration, notes=notes)
+    out.mkdir(parents=True, exist_ok=True)
+    est = Trajectory(result.stamps_ns, result.T_odom_x)
+    write_tum(out / "trajectory.tum", est, header=f"atsvo-replay {Path(bag_path).name} mode={used_mode} "
+              f"frame={'base' if frame == 'base' else 'colour optical'} (T_odom_{frame})")
+    tt = result.tracking_time_s
+    timing = {"mode": used_mode, "frame": frame, "n_frames": len(stamps), "wall_time_s": wall,
+              "bag_duration_s": bag_duration, "real_time_factor": result.real_time_factor,
+              "tracking_time_mean_s": float(np.mean(tt)), "tracking_time_p95_s": float(np.percentile(tt, 95)),
+              "tracking_time_max_s": float(np.max(tt)),
+              "status_counts": {s: statuses.count(s) for s in sorted(set(statuses))},
+              "sync": sync_stats, "event_decoders": dec_stats, "notes": notes, "frames": frames_info}
+    (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
+    gt = gt_file
+    if gt is None and gt_stamps:
+        gt = Trajectory(np.asarray(gt_stamps, np.int64), np.stack(gt_poses)).sorted_unique()
+        write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {Path(bag_path).name}")
+    eval_result = None
+    if gt is not None:
+        from atsvo_ros.eval.metrics import EvalOptions, evaluate
+
+        ok = np.array([s in ("ok",) for s in statuses]) if statuses else None
+        opts = eval_options or EvalOptions(interpolate_gt=True)
+        eval_result = evaluate(gt, est, opts, est_ok=ok)
+        result.metrics = eval_result.to_json()
+        (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2) + "\n")
+    if plots:
+        from atsvo_ros.eval.plots import plot_run
+
+        plot_run(out, est, eval_result, title=f"{Path(bag_path).name} ({used_mode})")
+    return result
+
+
+def _main(args: argparse.Namespace) -> int:
+    from atsvo_ros.config import load_config
+    from atsvo_ros.eval.metrics import EvalOptions, format_metrics
+
+    overrides = parse_overrides(args.set)
+    config = None
+    if args.config or args.preset or overrides:
+        config = load_config(args.config or args.preset or "mini_cheetah", overrides=overrides)
+    topics = {r: getattr(args, f"{r}_topic") for r in TOPIC_FLAGS}
+    res = replay(args.bag, args.out, config, mode=args.mode, gt_path=args.gt, frame=args.frame, topics=topics,
+                 plots=not args.no_plots, progress=False if args.no_progress else None,
+                 eval_options=EvalOptions(align=args.align, interpolate_gt=not args.nearest_gt))
+    for note in res.notes:
+        print(f"note: {note}")
+    print(f"{len(res.stamps_ns)} frames, mode {res.mode}, {res.wall_time_s:.1f} s wall, "
+          f"real-time factor {res.real_time_factor:.2f}, mean tracking {np.mean(res.tracking_time_s) * 1e3:.1f} ms")
+    if res.metrics:
+        print(format_metrics(res.metrics))
+    print(f"wrote {Path(args.out) / 'trajectory.tum'}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``atsvo-replay``."""
+    parser = argparse.ArgumentParser(prog="atsvo-replay", description=__doc__.splitlines()[0])
+    parser.add_argument("bag", help="ROS 1 .bag, ROS 2 bag directory (sqlite3/mcap) or a .mcap/.db3 file")
+    parser.add_argument("--out", required=True, help="output directory")
+    add_config_args(parser)
+    parser.add_argument("--preset", choices=("mini_cheetah", "mvsec", "synthetic"),
+                        help="bundled preset (default: chosen from the bag's topics); --config wins")
+    parser.add_argument("--mode", choices=("fused", "rgbd"), help="fused (events + RGB-D) or rgbd (never events)")
+    parser.add_argument("--gt", help="ground truth TUM file (default: the bag's pose topic, if any)")
+    parser.add_argument("--frame", choices=("base", "camera"), default="base",
+                        help="pose written to trajectory.tum: robot base (default) or colour optical frame")
+    parser.add_argument("--align", choices=("paper", "se3", "sim3", "none"), default="paper",
+                        help="alignment for metrics.json (default: paper)")
+    parser.add_argument("--nearest-gt", action="store_true",
+                        help="pair each frame with the nearest ground-truth pose instead of interpolating")
+    for role in TOPIC_FLAGS:
+        parser.add_argument(f"--{role.replace('_', '-')}-topic", dest=f"{role}_topic", metavar="TOPIC",
+                            help=f"{role.replace('_', ' ')} topic (default: auto-detected)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``atsvo-replay``."""
+    return run(_main, build_parser(), argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,162 @@
+"""atsvo-replay on small bags written in the test, with a test double of the odometry facade.
+
+The double (defined here, never shipped) returns the known test motion, so what is checked is the
+replay's plumbing: streaming, pairing, event cutting, outputs, metrics, determinism, errors.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from atsvo_ros.config import load_config
+from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.io.trajectory import read_tum
+from atsvo_ros.tools import replay as replay_mod
+from atsvo_ros.tools.replay import main, replay
+from test.io.test_bags import gt_pose, write_bag
+
+T0 = 1_700_000_000_000_000_000
+
+
+@dataclass(frozen=True)
+class _Result:
+    stamp_ns: int
+    T_odom_base: np.ndarray
+    T_odom_camera: np.ndarray
+    covariance: np.ndarray
+    status: str
+    mode: str
+    tracking_time_s: float
+    n_points: int
+    n_inliers: int
+    keyframe_inserted: bool
+
+
+class FakeOdometry:
+    """Test double of atsvo_ros.core.odometry.Odometry: reports the known motion of write_bag."""
+
+    supports_events = True
+    instances: list = []
+
+    def __init__(self, config, rgb_camera, event_camera=None):
+        self.T_base_rgb = config.rig.T_base_rgb_matrix()
+        self.camera = rgb_camera
+        self.event_camera = event_camera
+        self.events = []
+        self.frames = []
+        FakeOdometry.instances.append(self)
+
+    def add_events(self, batch):
+        self.events.append(batch)
+
+    def process_frame(self, frame):
+        self.frames.append(frame)
+        T = se3_inv(gt_pose(0.0)) @ gt_pose((frame.stamp_ns - T0) * 1e-9)
+        return _Result(frame.stamp_ns, T, T @ self.T_base_rgb, np.eye(6), "ok",
+                       "fused" if self.event_camera is not None else "rgbd", 0.001, 100, 90, False)
+
+
+@pytest.fixture()
+def fake(monkeypatch):
+    FakeOdometry.instances = []
+    return FakeOdometry
+
+
+def test_replay_outputs_and_metrics(tmp_path, fake):
+    bag = write_bag(tmp_path / "seq", "mcap", n_frames=12)
+    res = replay(bag, tmp_path / "out", load_config("synthetic"), odometry_factory=fake, progress=False)
+    out = tmp_path / "out"
+    traj = read_tum(out / "trajectory.tum")
+    assert len(traj) == 12 and res.mode == "fused"
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["ate_rmse_m"] < 1e-6 and doc["n_matched"] == 12 and doc["diverged"] is False
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["n_frames"] == 12 and {f["status"] for f in timing["frames"]} == {"ok"}
+    assert timing["frames"][0]["mode"] == "fused"
+    for name in ("trajectory", "position", "orientation", "error"):
+        assert (out / f"{name}.png").is_file()
+    odo = fake.instances[0]
+    # camera from camera_info (32x24 in the bag), T_base_rgb from /tf_static
+    assert (odo.camera.width, odo.camera.height, odo.camera.fx) == (32, 24, 20.0)
+    np.testing.assert_allclose(odo.T_base_rgb[:3, 2], [1, 0, 0], atol=1e-9)
+    # every event before the last frame was delivered, once, in order, cut at frame stamps
+    ev_t = np.concatenate([b.t for b in odo.events])
+    assert np.all(np.diff(ev_t) >= 0)
+    stamps = [f.stamp_ns for f in odo.frames]
+    assert ev_t.max() <= stamps[-1]
+
+
+def test_three_containers_give_identical_trajectories(tmp_path, fake):
+    outs = []
+    for fmt in ("ros1", "sqlite3", "mcap"):
+        bag = write_bag(tmp_path / f"seq_{fmt}", fmt, n_frames=8)
+        replay(bag, tmp_path / fmt, load_config("synthetic"), odometry_factory=fake, plots=False, progress=False)
+        outs.append((tmp_path / fmt / "trajectory.tum").read_text().splitlines()[1:])
+    assert outs[0] == outs[1] == outs[2]
+    ev = [np.concatenate([b.t for b in inst.events]) for inst in fake.instances]
+    assert all(np.array_equal(ev[0], e) for e in ev[1:])
+
+
+def test_rgbd_mode_and_camera_frame(tmp_path, fake):
+    bag = write_bag(tmp_path / "seq", "sqlite3", n_frames=6)
+    res = replay(bag, tmp_path / "out", load_config("synthetic"), mode="rgbd", frame="camera",
+                 odometry_factory=fake, plots=False, progress=False)
+    assert res.mode == "rgbd" and fake.instances[0].events == []
+    traj = read_tum(tmp_path / "out" / "trajectory.tum")
+    T_base_rgb = fake.instances[0].T_base_rgb
+    expected = se3_inv(gt_pose(0.0)) @ gt_pose((traj.stamps_ns[3] - T0) * 1e-9) @ T_base_rgb
+    np.testing.assert_allclose(traj.T_w_b[3], expected, atol=1e-8)
+
+
+def test_bag_without_events_runs_rgbd_and_external_gt(tmp_path, fake):
+    bag = write_bag(tmp_path / "seq", "mcap", n_frames=10, events=False, gt=False)
+    gt = tmp_path / "gt.tum"
+    from atsvo_ros.io.trajectory import Trajectory, write_tum
+    stamps = T0 + np.arange(0, 400) * 1_000_000
+    write_tum(gt, Trajectory(stamps, np.stack([gt_pose((s - T0) * 1e-9) for s in stamps])))
+    res = replay(bag, tmp_path / "out", load_config("synthetic"), gt_path=gt, odometry_factory=fake,
+                 plots=False, progress=False)
+    assert res.mode == "rgbd" and any("no event topic" in n for n in res.notes)
+    assert res.metrics["ate_rmse_m"] < 1e-6
+
+
+def test_depth_arriving_late_is_still_paired(tmp_path, fake):
+    bag = write_bag(tmp_path / "seq", "mcap", n_frames=10, depth_delay_ns=40_000_000)
+    replay(bag, tmp_path / "out", load_config("synthetic"), odometry_factory=fake, plots=False, progress=False)
+    assert len(read_tum(tmp_path / "out" / "trajectory.tum")) == 10
+
+
+def _one_line_error(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    return err
+
+
+def test_user_errors_exit_1_with_one_line(tmp_path, capsys, monkeypatch, fake):
+    monkeypatch.setattr(replay_mod, "replay", _with_fake(replay_mod.replay, fake))
+    out = str(tmp_path / "out")
+    nodepth = write_bag(tmp_path / "nodepth", "mcap", n_frames=2, depth=False)
+    assert main([str(nodepth), "--out", out, "--no-progress"]) == 1
+    assert "no depth topic" in _one_line_error(capsys)
+    bayer = write_bag(tmp_path / "bayer", "sqlite3", n_frames=2, rgb_encoding="bayer_rggb8")
+    assert main([str(bayer), "--out", out, "--no-progress"]) == 1
+    assert "bayer_rggb8" in _one_line_error(capsys)
+    corrupt = tmp_path / "corrupt.bag"
+    corrupt.write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 8)
+    assert main([str(corrupt), "--out", out, "--no-progress"]) == 1
+    assert "corrupt.bag" in _one_line_error(capsys)
+    assert main([str(tmp_path / "nothere.mcap"), "--out", out]) == 1
+    assert "nothere.mcap" in _one_line_error(capsys)
+    ok = write_bag(tmp_path / "ok", "mcap", n_frames=2)
+    assert main([str(ok), "--out", out, "--rgb-topic", "/wrong"]) == 1
+    assert "/wrong" in _one_line_error(capsys)
+
+
+def _with_fake(fn, fake):
+    def wrapped(*args, **kwargs):
+        kwargs["odometry_factory"] = fake
+        return fn(*args, **kwargs)
+    return wrapped
