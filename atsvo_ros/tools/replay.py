@@ -1,5 +1,8 @@
 """``atsvo-replay BAG --out DIR``: run the odometry pipeline over a recorded bag, offline, without ROS.
 
+BAG is a ROS 1 .bag, a ROS 2 bag directory (sqlite3 / mcap), a bare .mcap / .db3 file, or an
+MVSEC ``*_data.hdf5`` file (its ``*_gt.hdf5`` sibling is read for depth and pose).
+
 Exactly the core the ROS node runs (:class:`atsvo_ros.core.odometry.Odometry` fed by the same
 :class:`~atsvo_ros.io.sync.FrameAssembler`), deterministic, streaming (memory does not grow with
 the bag). Writes DIR/trajectory.tum (robot base pose, or the colour optical frame with ``--frame
@@ -100,11 +103,122 @@ def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[s
     return _with_rig(cfg, **updates) if updates else cfg
 
 
+class _BagSource:
+    """A ROS bag as a replay source: messages feed the assembler, poses go to the ground truth."""
+
+    def __init__(self, path: Path, topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> None:
+        from atsvo_ros.io.bags import Bag
+
+        self.bag = Bag(path, topics=topics, config_topics=vars(config.topics) if config else None)
+        self.topic_types = self.bag.topic_types
+
+    def close(self) -> None:
+        self.bag.close()
+
+    def has(self, role: str) -> bool:
+        return getattr(self.bag.selection, role) is not None
+
+    def require(self) -> None:
+        self.bag.require("rgb", "depth")
+
+    def n_frames(self) -> int:
+        return self.bag.message_count("rgb")
+
+    def duration_s(self) -> float:
+        return self.bag.duration_s
+
+    def setup(self, config: AtsvoConfig, notes: list[str]):
+        first = self.bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events"])
+        config = _extrinsics(config, self.bag, first, notes)
+        return (config, *_cameras(config, first, notes))
+
+    def feed(self, assembler: Any, use_events: bool, gt: list | None) -> Any:
+        """Generator: feeds one message per step into ``assembler`` (and ground truth into ``gt``)."""
+        from atsvo_ros.io.bags import pose_from_msg
+        from atsvo_ros.io.images import stamp_ns
+
+        roles = ["rgb", "depth"] + (["events"] if use_events else []) + (["ground_truth"] if gt is not None else [])
+        for m in self.bag.messages(roles):
+            if m.role == "rgb":
+                assembler.add_rgb_msg(m.msg)
+            elif m.role == "depth":
+                assembler.add_depth_msg(m.msg)
+            elif m.role == "events":
+                assembler.add_events(m.events)
+            else:
+                gt.append((stamp_ns(m.msg), pose_from_msg(m.msg)))
+            yield
+
+    def decoder_stats(self) -> dict[str, Any]:
+        return {t: d.stats.as_dict() for t, d in self.bag.event_decoders.items() if hasattr(d, "stats")}
+
+
+class _MvsecSource:
+    """MVSEC HDF5 (``*_data.hdf5``, with ``*_gt.hdf5`` next to it used automatically)."""
+
+    topic_types = {"/davis/left/": "mvsec"}
+
+    def __init__(self, path: Path) -> None:
+        from atsvo_ros.io.mvsec import MvsecReader
+
+        gt = path.with_name(path.name.replace("_data", "_gt"))
+        self.reader = MvsecReader(path, gt if gt != path and gt.is_file() else None)
+
+    def close(self) -> None:
+        self.reader.close()
+
+    def has(self, role: str) -> bool:
+        return role in ("rgb", "depth", "events", "ground_truth") and self.reader.has(role)
+
+    def require(self) -> None:
+        for role in ("rgb", "depth"):
+            if not self.reader.has(role):
+                raise BagError(f"the MVSEC files have no {role} dataset (depth is in the *_gt.hdf5 file)")
+
+    def n_frames(self) -> int:
+        d = self.reader._get("image_raw")
+        return 0 if d is None else len(d)
+
+    def duration_s(self) -> float:
+        ts = self.reader._get("image_raw_ts")
+        return float(ts[-1] - ts[0]) if ts is not None and len(ts) > 1 else 0.0
+
+    def setup(self, config: AtsvoConfig, notes: list[str]):
+        notes.append("cameras and extrinsics from the configuration (MVSEC HDF5)")
+        return config, config.rgb_camera.model(), config.event_camera.model()
+
+    def feed(self, assembler: Any, use_events: bool, gt: list | None) -> Any:
+        from atsvo_ros.io.images import depth_to_metres
+
+        if gt is not None and self.reader.has("ground_truth"):
+            g = self.reader.ground_truth()
+            gt.extend(zip(g.stamps_ns.tolist(), g.T_w_b))
+        rig = assembler.rig
+        for item in self.reader.stream(("rgb", "depth", "events") if use_events else ("rgb", "depth")):
+            if item.role == "rgb":
+                assembler.add_rgb(item.stamp_ns, item.data)
+            elif item.role == "depth":
+                assembler.add_depth(item.stamp_ns, depth_to_metres(item.data, rig.depth_scale_m, rig.depth_min_m,
+                                                                   rig.depth_max_m))
+            else:
+                assembler.add_events(item.data)
+            yield
+
+    def decoder_stats(self) -> dict[str, Any]:
+        return {}
+
+
+def _open_source(path: Path, topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> Any:
+    if path.suffix.lower() in (".hdf5", ".h5"):
+        return _MvsecSource(path)
+    return _BagSource(path, topics, config)
+
+
 def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None = None, *,
            mode: str | None = None, gt_path: str | Path | None = None, frame: str = "base",
            topics: dict[str, str | None] | None = None, plots: bool = True, progress: bool | None = None,
            odometry_factory: Callable[..., Any] | None = None, eval_options: Any = None) -> ReplayResult:
-    """Replay one bag through the odometry and write the outputs (see the module docstring).
+    """Replay one bag (or MVSEC HDF5 file) through the odometry and write the outputs.
 
     ``config=None`` picks the preset from the bag's topics; ``mode`` defaults to ``config.mode``;
     ``odometry_factory(config, rgb_camera, event_camera)`` defaults to the core's ``Odometry``.
@@ -112,8 +226,6 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
     from tqdm import tqdm
 
     from atsvo_ros.config import load_config
-    from atsvo_ros.io.bags import Bag, pose_from_msg
-    from atsvo_ros.io.images import stamp_ns
     from atsvo_ros.io.sync import FrameAssembler
     from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
 
@@ -122,39 +234,35 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
     out = Path(out_dir)
     notes: list[str] = []
     gt_file = read_tum(gt_path) if gt_path else None
-    with Bag(bag_path, topics=topics, config_topics=vars(config.topics) if config else None) as bag:
+    source = _open_source(Path(bag_path), topics, config)
+    try:
         if config is None:
-            preset = detect_preset(bag.topic_types)
+            preset = detect_preset(source.topic_types)
             config = load_config(preset)
             notes.append(f"config preset {preset} (from the bag's topics)")
         mode = mode or config.mode
         if mode not in ("fused", "rgbd"):
             raise ConfigError(f"--mode must be fused or rgbd, got {mode!r}")
-        bag.require("rgb", "depth")
+        source.require()
         if odometry_factory is None:
             from atsvo_ros.core.odometry import Odometry
 
             odometry_factory = Odometry
         supports_events = bool(getattr(odometry_factory, "supports_events", False))
-        use_events = mode == "fused" and bag.selection.events is not None and supports_events
+        use_events = mode == "fused" and source.has("events") and supports_events
         if mode == "fused" and not use_events:
-            notes.append("RGB-D only: " + ("the bag has no event topic" if bag.selection.events is None
+            notes.append("RGB-D only: " + ("the bag has no event topic" if not source.has("events")
                                            else "the odometry core does not fuse events yet"))
-        first = bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events"])
-        config = _extrinsics(config, bag, first, notes)
-        rgb_cam, ev_cam = _cameras(config, first, notes)
+        config, rgb_cam, ev_cam = source.setup(config, notes)
         odom = odometry_factory(config, rgb_cam, ev_cam if use_events else None)
         assembler = FrameAssembler(config.rig, with_events=use_events)
-        roles = ["rgb", "depth"] + (["events"] if use_events else []) + \
-            (["ground_truth"] if gt_file is None and bag.selection.ground_truth else [])
         stamps: list[int] = []
         poses: list[np.ndarray] = []
         statuses: list[str] = []
         frames_info: list[dict[str, Any]] = []
-        gt_stamps: list[int] = []
-        gt_poses: list[np.ndarray] = []
+        gt_samples: list | None = [] if gt_file is None and source.has("ground_truth") else None
         t_wall0 = time.perf_counter()
-        bar = tqdm(total=bag.message_count("rgb"), unit="frame", desc="replay",
+        bar = tqdm(total=source.n_frames(), unit="frame", desc="replay",
                    disable=None if progress is None else not progress, leave=False)
 
         def process(pairs: list) -> None:
@@ -175,23 +283,16 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
                 bar.update(1)
                 bar.set_postfix(rtf=f"{span / wall:.2f}" if wall > 0 else "-", status=status, refresh=False)
 
-        for m in bag.messages(roles):
-            if m.role == "rgb":
-                assembler.add_rgb_msg(m.msg)
-            elif m.role == "depth":
-                assembler.add_depth_msg(m.msg)
-            elif m.role == "events":
-                assembler.add_events(m.events)
-            elif m.role == "ground_truth":
-                gt_stamps.append(stamp_ns(m.msg))
-                gt_poses.append(pose_from_msg(m.msg))
+        for _ in source.feed(assembler, use_events, gt_samples):
             process(assembler.pop_ready())
         process(assembler.flush())
         bar.close()
         wall = time.perf_counter() - t_wall0
-        bag_duration = bag.duration_s
+        bag_duration = source.duration_s()
         sync_stats = dataclasses.asdict(assembler.stats)
-        dec_stats = {t: d.stats.as_dict() for t, d in bag.event_decoders.items() if hasattr(d, "stats")}
+        dec_stats = source.decoder_stats()
+    finally:
+        source.close()
     if not stamps:
         raise BagError(f"no colour/depth pair could be formed from {bag_path} (sync tolerance "
                        f"{config.rig.sync_tolerance_s} s; dropped {sync_stats['dropped_rgb']} colour and "
@@ -212,8 +313,9 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
               "sync": sync_stats, "event_decoders": dec_stats, "notes": notes, "frames": frames_info}
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
     gt = gt_file
-    if gt is None and gt_stamps:
-        gt = Trajectory(np.asarray(gt_stamps, np.int64), np.stack(gt_poses)).sorted_unique()
+    if gt is None and gt_samples:
+        gt = Trajectory(np.asarray([g[0] for g in gt_samples], np.int64),
+                        np.stack([g[1] for g in gt_samples])).sorted_unique()
         write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {Path(bag_path).name}")
     eval_result = None
     if gt is not None:
