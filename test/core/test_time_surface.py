@@ -1,0 +1,244 @@
+"""Time surfaces: Eq. 1-2 against a direct per-pixel reference, behaviour under fast/slow motion."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from atsvo_ros.config import AtsConfig
+from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.time_surface import (
+    AdaptiveTimeSurface,
+    ConstantTimeSurface,
+    SpeedInvariantTimeSurface,
+    make_time_surface,
+    ring_pattern,
+)
+from atsvo_ros.errors import ConfigError
+
+# the FAST-9 Bresenham circle of radius 3, written out independently of ring_pattern()
+FAST16 = [(0, -3), (1, -3), (2, -2), (3, -1), (3, 0), (3, 1), (2, 2), (1, 3),
+          (0, 3), (-1, 3), (-2, 2), (-3, 1), (-3, 0), (-3, -1), (-2, -2), (-1, -3)]
+RAW = dict(blur_ksize=1, median_ksize=1)  # compare Eq. 1-2 before the smoothing
+
+
+def _random_events(n, w, h, span_ns, seed):
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.integers(0, span_ns, n))
+    return EventBatch(rng.integers(0, w, n), rng.integers(0, h, n), t, rng.integers(0, 2, n), w, h)
+
+
+def _reference_ats(b: EventBatch, w: int, h: int, t_q: int, cfg: AtsConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 1-2 computed pixel by pixel in plain Python, straight from the paper's description."""
+    last: dict[tuple[int, int], int] = {}
+    for x, y, t in zip(b.x.tolist(), b.y.tolist(), b.t.tolist()):
+        last[(x, y)] = t  # events are time-ordered: the later one wins
+    img = np.zeros((h, w))
+    tau = np.full((h, w), np.nan)
+    for (x, y), tl in last.items():
+        neighbours = [last[(x + dx, y + dy)] for dx, dy in FAST16 if (x + dx, y + dy) in last]
+        latest = sorted(neighbours, reverse=True)[: cfg.n_latest]  # inactive pixels never enter the ranking
+        if latest:
+            age = sum(max(t_q - v, 0) for v in latest) / len(latest) * 1e-9
+            if cfg.tau_mode == "mean_age":
+                tau_x = min(max(age, cfg.tau_l_s), cfg.tau_u_s)
+            else:
+                tau_x = max(cfg.tau_u_s - age, cfg.tau_l_s)
+        else:
+            tau_x = cfg.tau_u_s
+        tau[y, x] = tau_x
+        img[y, x] = 255.0 * math.exp(-max(t_q - tl, 0) * 1e-9 / tau_x)
+    return img, tau
+
+
+def test_ring_pattern_is_the_fast_circle():
+    dx, dy = ring_pattern(3)
+    assert sorted(zip(dx.tolist(), dy.tolist())) == sorted(FAST16)
+    dx1, dy1 = ring_pattern(1)
+    assert len(set(zip(dx1.tolist(), dy1.tolist()))) == len(dx1) == 8  # duplicates removed at small radii
+
+
+@pytest.mark.parametrize("mode", ["mean_age", "eq2_printed"])
+@pytest.mark.parametrize("n_latest", [1, 4, 16])
+def test_ats_matches_per_pixel_reference_on_random_events(mode, n_latest):
+    w, h = 23, 17
+    cfg = AtsConfig(tau_u_s=0.03, tau_l_s=0.002, n_latest=n_latest, tau_mode=mode, **RAW)
+    b = _random_events(1500, w, h, 60_000_000, seed=n_latest)
+    ats = AdaptiveTimeSurface(w, h, cfg)
+    for part in np.array_split(np.arange(len(b)), 7):  # incremental updates must equal one pass
+        ats.update(b.select(part))
+    for t_q in (int(b.t[-1]), int(b.t[-1]) + 7_000_000, int(b.t[len(b) // 2])):
+        ref_img, ref_tau = _reference_ats(b, w, h, t_q, cfg) if t_q >= b.t[-1] else (None, None)
+        if ref_img is None:
+            continue
+        np.testing.assert_allclose(ats.tau_map(t_q), ref_tau, rtol=1e-5, equal_nan=True)
+        # render skips pixels so old that even tau_u leaves < 0.5 grey levels
+        np.testing.assert_allclose(ats.render_raw(t_q), ref_img, atol=0.5, rtol=1e-5)
+    assert ats.n_events == len(b) and ats.n_skipped == 0
+
+
+def test_ats_with_duplicate_timestamps_matches_reference():
+    w, h = 12, 10
+    rng = np.random.default_rng(7)
+    n = 800
+    t = np.sort(rng.integers(0, 40, n)) * 1_000_000  # only 40 distinct stamps: many ties
+    b = EventBatch(rng.integers(0, w, n), rng.integers(0, h, n), t, np.zeros(n), w, h)
+    cfg = AtsConfig(n_latest=3, **RAW)
+    ats = AdaptiveTimeSurface(w, h, cfg)
+    ats.update(b)
+    _, ref_tau = _reference_ats(b, w, h, int(t[-1]), cfg)
+    np.testing.assert_allclose(ats.tau_map(), ref_tau, rtol=1e-5, equal_nan=True)
+
+
+def _sweeping_edge(speed_px_s: float, w: int = 120, h: int = 40, x0: int = 5, x1: int = 100) -> EventBatch:
+    """A vertical edge crossing columns x0..x1 at ``speed_px_s``; every pixel of a column fires when it passes."""
+    xs, ys, ts = [], [], []
+    for col in range(x0, x1):
+        t = int((col - x0) / speed_px_s * 1e9)
+        xs.append(np.full(h, col))
+        ys.append(np.arange(h))
+        ts.append(np.full(h, t))
+    return EventBatch(np.concatenate(xs), np.concatenate(ys), np.concatenate(ts), np.ones(h * (x1 - x0)), w, h)
+
+
+def _moving_texture(speed_px_s: float, mean_spacing_px: float, duration_s: float = 0.08, w: int = 80, h: int = 24,
+                    seed: int = 0) -> EventBatch:
+    """Vertical edges at random spacing translating right at ``speed_px_s``: a column fires whenever an edge
+    crosses it, so the local event rate grows with speed and with texture density."""
+    rng = np.random.default_rng(seed)
+    reach = speed_px_s * duration_s + w
+    edges = -np.cumsum(rng.exponential(mean_spacing_px, int(reach / mean_spacing_px * 2) + 10)) + w
+    xs, ts = [], []
+    for col in range(w):
+        t = (col - edges) / speed_px_s  # when each edge reaches this column
+        t = t[(t >= 0) & (t < duration_s)]
+        xs.append(np.full(len(t), col))
+        ts.append(t)
+    x = np.concatenate(xs)
+    t = (np.concatenate(ts) * 1e9).astype(np.int64)
+    x = np.repeat(x, h)
+    y = np.tile(np.arange(h), len(t))
+    t = np.repeat(t, h)
+    order = np.argsort(t, kind="stable")
+    return EventBatch(x[order], y[order], t[order], np.ones(len(t)), w, h)
+
+
+def _steady_state(b: EventBatch, mode: str = "mean_age") -> tuple[float, float]:
+    """(median tau over fired pixels, median brightness of pixels that fired 4-6 ms before the query)."""
+    cfg = AtsConfig(tau_u_s=0.05, tau_l_s=0.0005, n_latest=4, tau_mode=mode, **RAW)
+    ats = AdaptiveTimeSurface(b.width, b.height, cfg)
+    ats.update(b)
+    t_q = int(b.t[-1])
+    tau = ats.tau_map(t_q)[:, 5:-5]
+    img = ats.render_raw(t_q)[:, 5:-5]
+    age = (t_q - ats.t_last[:, 5:-5]) * 1e-9
+    band = (age > 0.004) & (age < 0.006)
+    assert band.any()
+    return float(np.nanmedian(tau)), float(np.median(img[band]))
+
+
+def test_ats_decays_faster_under_fast_motion_than_slow():
+    tau_fast, val_fast = _steady_state(_moving_texture(2000.0, 6.0))
+    tau_slow, val_slow = _steady_state(_moving_texture(200.0, 6.0))
+    assert tau_fast < tau_slow
+    # a pixel that fired 5 ms ago has faded more under fast motion
+    assert val_fast < val_slow
+
+
+def test_ats_decays_faster_in_dense_texture_than_sparse():
+    tau_dense, val_dense = _steady_state(_moving_texture(500.0, 3.0))
+    tau_sparse, val_sparse = _steady_state(_moving_texture(500.0, 20.0))
+    assert tau_dense < tau_sparse
+    assert val_dense < val_sparse
+
+
+def test_ats_decays_faster_under_dense_random_events_than_sparse():
+    w, h = 64, 48
+    cfg = AtsConfig(tau_u_s=0.05, tau_l_s=0.001, **RAW)
+    dense = _random_events(40_000, w, h, 50_000_000, seed=1)   # ~13 events per pixel in 50 ms
+    sparse = _random_events(800, w, h, 50_000_000, seed=2)     # ~0.26 events per pixel
+    taus = []
+    for b in (dense, sparse):
+        ats = AdaptiveTimeSurface(w, h, cfg)
+        ats.update(b)
+        taus.append(np.nanmedian(ats.tau_map(50_000_000)))
+    assert taus[0] < taus[1]
+
+
+def test_eq2_as_printed_behaves_the_opposite_way():
+    """Documents why tau_mode defaults to mean_age (see the module docstring)."""
+    tau_fast, _ = _steady_state(_moving_texture(2000.0, 6.0), "eq2_printed")
+    tau_slow, _ = _steady_state(_moving_texture(200.0, 6.0), "eq2_printed")
+    assert tau_fast > tau_slow
+
+
+def test_constant_time_surface_is_eq1_with_one_tau():
+    w, h = 20, 15
+    cfg = AtsConfig(constant_tau_s=0.01, **RAW)
+    b = _random_events(500, w, h, 30_000_000, seed=4)
+    ts = ConstantTimeSurface(w, h, cfg)
+    ts.update(b)
+    t_q = int(b.t[-1]) + 1_000_000
+    last = np.full((h, w), -1, np.int64)
+    for x, y, t in zip(b.x, b.y, b.t):
+        last[y, x] = t
+    ref = np.where(last >= 0, 255.0 * np.exp(-(t_q - last) * 1e-9 / 0.01), 0.0)
+    np.testing.assert_allclose(ts.render_raw(t_q), ref, rtol=1e-5, atol=1e-3)
+    assert np.all(np.isnan(ts.tau_map()[last < 0])) and np.all(ts.tau_map()[last >= 0] == np.float32(0.01))
+
+
+def _reference_sits(b: EventBatch, w: int, h: int, r: int) -> np.ndarray:
+    s = np.zeros((h, w), np.int64)
+    full = (2 * r + 1) ** 2
+    for x, y in zip(b.x.tolist(), b.y.tolist()):
+        sp = s[y, x]
+        for yy in range(max(0, y - r), min(h, y + r + 1)):
+            for xx in range(max(0, x - r), min(w, x + r + 1)):
+                if s[yy, xx] >= sp and s[yy, xx] > 0:
+                    s[yy, xx] -= 1
+        s[y, x] = full
+    return s * 255.0 / full
+
+
+def test_speed_invariant_surface_matches_reference_and_ignores_speed():
+    w, h = 25, 20
+    cfg = AtsConfig(sits_radius_px=2, **RAW)
+    b = _random_events(2000, w, h, 10_000_000, seed=5)
+    s = SpeedInvariantTimeSurface(w, h, cfg)
+    for part in np.array_split(np.arange(len(b)), 3):
+        s.update(b.select(part))
+    np.testing.assert_allclose(s.render_raw(), _reference_sits(b, w, h, 2), rtol=1e-6)
+    # the same edge at 10x the speed leaves the same surface
+    imgs = []
+    for speed in (300.0, 3000.0):
+        e = _sweeping_edge(speed)
+        sits = SpeedInvariantTimeSurface(e.width, e.height, cfg)
+        sits.update(e)
+        imgs.append(sits.render_raw())
+    np.testing.assert_array_equal(imgs[0], imgs[1])
+
+
+@pytest.mark.parametrize("kind", ["ats", "constant", "sits"])
+def test_common_interface_and_smoothing(kind):
+    b = _random_events(3000, 40, 30, 20_000_000, seed=9)
+    surf = make_time_surface(kind, 40, 30, AtsConfig(blur_ksize=3, median_ksize=3))
+    surf.update(b)
+    img = surf.render()
+    assert img.shape == (30, 40) and img.dtype == np.float32
+    assert 0.0 <= float(img.min()) and float(img.max()) <= 255.0
+    raw = surf.render_raw()
+    assert float(np.abs(np.diff(img, axis=1)).mean()) < float(np.abs(np.diff(raw, axis=1)).mean())
+    surf.reset()
+    assert float(surf.render(int(b.t[-1])).max()) == 0.0
+
+
+def test_out_of_range_and_backwards_events_are_skipped_and_counted():
+    ats = AdaptiveTimeSurface(10, 10, AtsConfig(**RAW))
+    ats.update(EventBatch([1, 50, 2], [1, 2, 60], [10, 20, 30], [1, 1, 1]))
+    ats.update(EventBatch([1], [1], [5], [0]))  # older than that pixel's last event
+    assert ats.n_skipped == 3 and ats.t_last[1, 1] == 10
+    with pytest.raises(ConfigError):
+        make_time_surface("fancy", 10, 10)
+    with pytest.raises(ConfigError):
+        AdaptiveTimeSurface(0, 10)
