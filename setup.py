@@ -56,6 +56,9 @@ setup(
     entry_points={
         "console_scripts": [
             "atsvo-info = atsvo_ros.tools.info:main",
+            "atsvo-replay = atsvo_ros.tools.replay:main",
+            "atsvo-eval = atsvo_ros.tools.eval:main",
+            "atsvo-demo = atsvo_ros.tools.demo:main",
         ],
     },
 )
