@@ -117,7 +117,8 @@ class EventSelectionConfig:
     """Event pixel selection on the ATS (Section II-B, Eq. 3)."""
 
     alpha: float = _f(1.0, 0.0, 100.0, doc="gradient scale in I + alpha * grad > h")
-    h: float = _f(200.0, 0.0, 2000.0, doc="threshold h of Eq. 3 on the 0-255 ATS")
+    h: float = _f(90.0, 0.0, 2000.0, doc="threshold h of Eq. 3 on the 0-255 ATS (a trailing ATS pixel sits near "
+                                         "255/e = 94 with tau_mode mean_age; fresher, sharper pixels score above)")
     min_distance_px: int = _f(3, 0, 100, doc="d of Eq. 3: minimum spacing in x and y")
     mask_median_ksize: int = _f(5, 1, 31, doc="median blur kernel of the ATS mask (odd)")
     window_fraction: float = _f(0.25, 0.0, 1.0, lo_open=True, doc="share of the ATS window whose events are candidates")
@@ -140,11 +141,17 @@ class TrackerConfig:
     motion_threshold_trans_m: float = _f(0.05, 0.0, 10.0, doc="inter-frame translation that activates event fusion")
     min_inlier_fraction: float = _f(0.3, 0.0, 1.0, doc="below this the frame is lost")
     min_inliers: int = _f(30, 6, 100000, doc="fewer inlier map points than this and the frame is lost")
+    gradient_weight: float = _f(50.0, 0.0, 1000.0,
+                                doc="c of the pixel weight c^2/(c^2+|grad I|^2) (DSO); 0 = off")
     affine_brightness: bool = _f(True, doc="estimate a per-frame gain/offset (auto-exposure), as DSO does")
     max_step_m: float = _f(0.5, 0.0, 100.0, lo_open=True,
                            doc="camera translation per frame beyond which the estimate counts as diverged")
     max_step_rot_deg: float = _f(30.0, 0.0, 180.0, lo_open=True,
                                  doc="camera rotation per frame beyond which the estimate counts as diverged")
+    max_position_std_m: float = _f(0.05, 0.0, 100.0, lo_open=True,
+                                   doc="pose translation std above which the frame is lost (degenerate geometry)")
+    max_gain_ratio: float = _f(4.0, 1.0, 100.0, lo_open=True,
+                               doc="brightness gain beyond [1/x, x] of the map's counts as lost (blank frames)")
 
 
 @dataclass(frozen=True)

@@ -15,12 +15,14 @@ OUTLIER = 2
 
 @njit(cache=True)
 def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, offset, huber, outlier_thr,
-               border, H, g, state):  # pragma: no cover - compiled
+               border, grad_c2, H, g, state):  # pragma: no cover - compiled
     """Gauss-Newton system of the patch residuals ``r = I(pi(T_cr T_rw p) + o) - (gain z + offset)``.
 
     Parameters are ``(xi, a, b)``: a left perturbation ``xi`` of ``T_rw`` (twist, translation first),
     the log-gain ``a`` (gain = e^a) and offset ``b``. Fills ``H`` (8x8), ``g`` (8) with the
-    Huber-weighted ``J^T W J`` and ``J^T W r``, and ``state`` per point; returns
+    Huber-weighted ``J^T W J`` and ``J^T W r``, and ``state`` per point. Pixels are further weighted
+    by ``c^2 / (c^2 + |grad I|^2)`` (``grad_c2`` = c^2, 0 = off), DSO's guard against edges whose
+    sub-pixel blur and occlusions make them unreliable. Returns
     ``(energy, n_inliers, n_visible, sum of inlier squared residuals)``. Invisible points and
     outliers add a constant energy so energies of different estimates stay comparable.
     """
@@ -149,6 +151,8 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
                 energy += 2.0 * huber * ar - huber * huber
             gx = gxs[k]
             gy = gys[k]
+            if grad_c2 > 0.0:
+                wt *= grad_c2 / (grad_c2 + gx * gx + gy * gy)
             ja = -gain * zs[k]
             sxx += wt * gx * gx
             sxy += wt * gx * gy

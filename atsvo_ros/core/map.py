@@ -35,6 +35,7 @@ def valid_depth_mask(depth_m: np.ndarray, rig: RigConfig, edge_ratio: float | No
 
     A depth edge is a pixel whose 3x3 neighbourhood spans more than ``edge_ratio`` of its depth:
     there the colour and depth images disagree most and the back-projected point is unreliable.
+    Pixels next to invalid depth (hole borders, usually occlusion shadows) count as edges.
     """
     import cv2
 
@@ -44,7 +45,7 @@ def valid_depth_mask(depth_m: np.ndarray, rig: RigConfig, edge_ratio: float | No
         filled = np.where(ok, d, 0.0).astype(np.float32)
         kernel = np.ones((3, 3), np.uint8)
         dmax = cv2.dilate(filled, kernel)
-        dmin = cv2.erode(np.where(ok, d, np.float32(1e9)).astype(np.float32), kernel)
+        dmin = cv2.erode(filled, kernel)  # an invalid neighbour (0) marks a hole border: rejected too
         ok &= (dmax - dmin) <= edge_ratio * np.where(ok, d, 0.0)
     return ok
 

@@ -242,6 +242,10 @@ class Odometry:
             return False
         if res.n_inliers < max(cfg.min_inliers, cfg.min_inlier_fraction * res.n_visible):
             return False
+        if np.sqrt(np.linalg.eigvalsh(res.covariance[:3, :3]).max()) > cfg.max_position_std_m:
+            return False
+        if abs(res.affine["rgb"][0]) > np.log(cfg.max_gain_ratio):
+            return False
         rot, trans = relative_motion(se3_inv(self._history[-1][1]), se3_inv(res.T_rgb_w))
         return trans <= cfg.max_step_m and np.degrees(rot) <= cfg.max_step_rot_deg
 

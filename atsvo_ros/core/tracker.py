@@ -75,7 +75,7 @@ class ResidualBlock:
         return min(len(self.pyramid), self.patches.shape[0])
 
     def linearise(self, level: int, T_rgb_w: np.ndarray, affine: tuple[float, float],
-                  huber: float, outlier_thr: float) -> tuple[np.ndarray, np.ndarray, float, int, int, float]:
+                  huber: float, outlier_thr: float, grad_c: float = 0.0) -> tuple[np.ndarray, np.ndarray, float, int, int, float]:
         """Normal equations (8x8 ``H``, 8 ``g``), energy, inliers, visible points, inlier SSE at ``level``."""
         cam = self.cameras[level]
         H = np.zeros((8, 8))
@@ -86,7 +86,7 @@ class ResidualBlock:
         e, n_in, n_vis, sse = kernels._linearise(
             self.points_w, patches, self.pyramid[level], self.pattern, cam.fx, cam.fy, cam.cx, cam.cy,
             np.ascontiguousarray(T_rgb_w), self.T_cam_rgb, float(np.exp(affine[0])), float(affine[1]),
-            float(huber), float(outlier_thr), float(self.border_px), H, g, self.state)
+            float(huber), float(outlier_thr), float(self.border_px), float(grad_c) ** 2, H, g, self.state)
         return H * self.weight, g * self.weight, e * self.weight, int(n_in), int(n_vis), float(sse)
 
 
@@ -134,7 +134,8 @@ class Tracker:
         for blk in blocks:
             if level >= blk.n_levels or len(blk.points_w) == 0:
                 continue
-            Hb, gb, e, ni, nv, s = blk.linearise(level, T, affine[blk.name], cfg.huber_delta, thr)
+            Hb, gb, e, ni, nv, s = blk.linearise(level, T, affine[blk.name], cfg.huber_delta, thr,
+                                                 cfg.gradient_weight)
             H[:6, :6] += Hb[:6, :6]
             g[:6] += gb[:6]
             if blk.estimate_affine:
@@ -243,7 +244,9 @@ class Tracker:
     @staticmethod
     def _covariance(H: np.ndarray, n_res: int, sse: float) -> np.ndarray:
         dof = max(1, n_res - H.shape[0])
-        sigma2 = sse / dof if n_res > H.shape[0] else 1e4
+        # The residual variance, floored at 1 intensity^2 (quantisation and sensor noise never vanish),
+        # so a degenerate fit (a blank image explained by the brightness model) is not "certain".
+        sigma2 = max(sse / dof, 1.0) if n_res > H.shape[0] else 1e4
         try:
             cov = np.linalg.inv(H + 1e-9 * np.eye(len(H)))[:6, :6] * sigma2
         except np.linalg.LinAlgError:

@@ -25,6 +25,12 @@ def make_texture(seed: int, size: int = 512) -> np.ndarray:
     return (20.0 + 215.0 * tex / tex.max()).astype(np.float32)
 
 
+def _rays(camera: CameraModel, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Viewing rays with z = 1 through (raw, possibly distorted) pixels."""
+    xy = camera.pixel_to_normalized(np.column_stack([u.ravel(), v.ravel()]))
+    return np.concatenate([xy, np.ones((len(xy), 1))], axis=1).reshape(u.shape + (3,))
+
+
 class BoxRoom:
     """Axis-aligned room around the origin: planes ``n . p = d`` with their own textures."""
 
@@ -42,11 +48,11 @@ class BoxRoom:
         self.textures = [make_texture(seed * 10 + i) for i in range(len(self.planes))]
 
     def render(self, camera: CameraModel, T_w_c: np.ndarray, supersample: int = 2) -> tuple[np.ndarray, np.ndarray]:
-        """Grey image (float32, 0-255) and z-depth (float32 m) of a pinhole camera at ``T_w_c``."""
+        """Grey image (float32, 0-255) and z-depth (float32 m) of a camera at ``T_w_c`` (raw pixels)."""
         s = supersample
         w, h = camera.width * s, camera.height * s
         u, v = np.meshgrid((np.arange(w) + 0.5) / s - 0.5, (np.arange(h) + 0.5) / s - 0.5)
-        d_c = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], -1)
+        d_c = _rays(camera, u, v)
         R, o = T_w_c[:3, :3], T_w_c[:3, 3]
         d_w = d_c @ R.T
         best_t = np.full(u.shape, np.inf)
@@ -78,7 +84,7 @@ class BoxRoom:
     def render_depth(self, camera: CameraModel, T_w_c: np.ndarray) -> np.ndarray:
         """Exact z-depth at pixel centres."""
         u, v = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
-        d_c = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], -1)
+        d_c = _rays(camera, u, v)
         R, o = T_w_c[:3, :3], T_w_c[:3, 3]
         d_w = d_c @ R.T
         best_t = np.full(u.shape, np.inf)

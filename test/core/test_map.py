@@ -1,0 +1,91 @@
+"""Map points, per-level patches, depth validity, culling and the temporary event map."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from atsvo_ros.config import MappingConfig, RigConfig
+from atsvo_ros.core.geometry import se3_exp, transform_points
+from atsvo_ros.core.map import PointMap, TemporaryEventMap, extract_patches, valid_depth_mask
+from atsvo_ros.core.photometric import ATS_PATTERN, RGB_PATTERN, bilinear, level_position
+from atsvo_ros.core.pyramid import build_pyramid
+from atsvo_ros.errors import TrackingError
+
+
+def test_valid_depth_mask_rejects_invalid_out_of_range_and_edges():
+    rig = RigConfig(depth_min_m=0.3, depth_max_m=6.0)
+    d = np.full((20, 20), 2.0, np.float32)
+    d[1, 1] = 0.0
+    d[2, 2] = np.nan
+    d[3, 3] = 0.2
+    d[4, 4] = 7.0
+    d[10:, 10:] = 4.0  # a depth step: pixels along it are edges
+    ok = valid_depth_mask(d, rig)
+    assert not ok[1, 1] and not ok[2, 2] and not ok[3, 3] and not ok[4, 4] and ok[15, 15] and ok[9, 12]
+    ok_e = valid_depth_mask(d, rig, edge_ratio=0.05)
+    assert not ok_e[9, 12] and not ok_e[10, 12] and ok_e[15, 15] and ok_e[6, 15]
+    assert not ok_e[0, 1]  # next to the invalid pixel
+
+
+def test_patches_hold_pattern_intensities_on_every_level():
+    rng = np.random.default_rng(0)
+    img = rng.uniform(0, 255, (64, 80)).astype(np.float32)
+    pyr = build_pyramid(img, 3)
+    uv = np.array([[20, 30], [41, 17], [60, 40]])
+    patches = extract_patches(pyr, uv, RGB_PATTERN)
+    assert patches.shape == (3, 3, 9) and patches.dtype == np.float32
+    assert np.allclose(patches[0, :, 0], img[uv[:, 1], uv[:, 0]])
+    assert np.allclose(patches[0, 1, 2], img[16, 41])  # offset (0, -1)
+    for lvl in (1, 2):
+        pos = level_position(uv, lvl)
+        assert np.allclose(patches[lvl, :, 0], bilinear(pyr[lvl], pos)[0], atol=1e-4)
+    # Brightness normalisation: z = (I - b) / e^a
+    pa = extract_patches(pyr, uv, ATS_PATTERN, affine=(np.log(2.0), 10.0))
+    assert pa.shape == (3, 3, 14)
+    assert np.allclose(pa[0, :, 0], (img[uv[:, 1], uv[:, 0]] - 10.0) / 2.0, atol=1e-4)
+
+
+def _add(m: PointMap, n: int, T=np.eye(4)):
+    p = np.column_stack([np.zeros(n), np.zeros(n), np.full(n, 2.0)])
+    return m.add_keyframe(len(m.keyframes), T, (0.0, 0.0), p, np.zeros((2, n, 9), np.float32))
+
+
+def test_point_map_stores_world_points_and_hosts():
+    m = PointMap(2, 9)
+    T = se3_exp(np.array([1.0, 0.0, 0.0, 0.0, 0.3, 0.0]))
+    kf = _add(m, 5, T)
+    assert len(m) == 5 and kf.n_points == 5 and m.last_keyframe is kf
+    assert np.allclose(m.points_w, transform_points(T, np.array([[0.0, 0.0, 2.0]])))
+    with pytest.raises(TrackingError):
+        m.add_keyframe(1, np.eye(4), (0, 0), np.ones((2, 3)), np.zeros((2, 3, 9), np.float32))
+    with pytest.raises(TrackingError):
+        m.add_keyframe(1, np.eye(4), (0, 0), -np.ones((1, 3)), np.zeros((2, 1, 9), np.float32))
+
+
+def test_culling_bounds_memory_over_many_keyframes():
+    cfg = MappingConfig(max_keyframes=4, max_points=1000, max_outlier_frames=3)
+    m = PointMap(2, 9)
+    for _ in range(50):
+        _add(m, 400)
+        m.cull(cfg)
+        assert len(m) <= 1000 and len(m.keyframes) <= 4
+        assert m.patches.shape[1] == len(m) == len(m.host) == len(m.outlier_run)
+    assert m.host.min() >= 47  # only the newest keyframes survive
+
+
+def test_repeated_outliers_are_culled():
+    cfg = MappingConfig(max_outlier_frames=3)
+    m = PointMap(2, 9)
+    _add(m, 4)
+    states = np.array([1, 2, 2, 0], dtype=np.int8)
+    for _ in range(2):
+        m.update_observations(states)
+    m.update_observations(np.array([1, 1, 2, 0], dtype=np.int8))  # point 1 recovered
+    assert m.cull(cfg) == 1 and len(m) == 3
+    with pytest.raises(TrackingError):
+        m.update_observations(np.zeros(7, np.int8))
+
+
+def test_temporary_event_map_container():
+    ev = TemporaryEventMap.empty(3, 14)
+    assert len(ev) == 0 and ev.patches.shape == (3, 0, 14)

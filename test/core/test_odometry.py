@@ -1,0 +1,118 @@
+"""The odometry facade: frames, extrinsics, distortion, loss and re-initialisation, outputs."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from atsvo_ros.config import load_config
+from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.geometry import se3_exp, se3_inv, se3_log
+from atsvo_ros.core.odometry import Odometry, OdometryResult, RgbdFrame, TrackingStatus
+from atsvo_ros.errors import ImageError, TrackingError
+from test.core.render_helpers import BoxRoom
+
+CAM = CameraModel(640, 480, 382.0, 382.0, 319.5, 239.5)
+MS = 1_000_000
+
+
+@pytest.fixture(scope="module")
+def room() -> BoxRoom:
+    return BoxRoom(seed=7)
+
+
+@pytest.fixture(scope="module")
+def config():
+    return load_config("synthetic")  # non-trivial T_base_rgb
+
+
+def _frame(room, cam, T_w_c, stamp_ns, ss=3):
+    img, depth = room.render(cam, T_w_c, supersample=ss)
+    rgb = np.repeat(np.clip(img + 0.5, 0, 255).astype(np.uint8)[..., None], 3, axis=2)
+    return RgbdFrame(stamp_ns, rgb, depth)
+
+
+def _err(T_est, T_gt):
+    e = se3_log(se3_inv(T_gt) @ T_est)
+    return np.linalg.norm(e[:3]), np.degrees(np.linalg.norm(e[3:]))
+
+
+def test_first_frame_defines_odom_and_offsets_come_out_in_base_frame(room, config):
+    odo = Odometry(config, CAM)
+    assert odo.supports_events is False
+    T_b_c = config.rig.T_base_rgb_matrix()
+    r0 = odo.process_frame(_frame(room, CAM, np.eye(4), 0))
+    assert isinstance(r0, OdometryResult)
+    assert r0.status is TrackingStatus.INITIALISING and r0.keyframe_inserted and r0.n_points > 500
+    assert np.allclose(r0.T_odom_base, np.eye(4)) and np.allclose(r0.T_odom_camera, T_b_c)
+    T_c0_c1 = se3_exp(np.array([0.02, -0.01, 0.03, 0.01, -0.015, 0.008]))
+    r1 = odo.process_frame(_frame(room, CAM, T_c0_c1, 33 * MS))
+    assert r1.status is TrackingStatus.OK and r1.mode == "rgbd"
+    gt = T_b_c @ T_c0_c1 @ se3_inv(T_b_c)
+    dt, dr = _err(r1.T_odom_base, gt)
+    assert dt < 1e-3 and dr < 0.05, (dt, dr)
+    assert np.allclose(r1.T_odom_camera, r1.T_odom_base @ T_b_c)
+    cov = r1.covariance
+    assert cov.shape == (6, 6) and np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
+    assert np.all(np.sqrt(np.diag(cov))[:3] < 0.01)
+    assert r1.n_inliers > 0.5 * r1.n_points and r1.tracking_time_s > 0
+
+
+def test_covariance_is_expressed_in_the_base_frame(room, config):
+    """The camera looks along base x: depth (camera z) is the best-constrained translation."""
+    odo = Odometry(config, CAM)
+    odo.process_frame(_frame(room, CAM, np.eye(4), 0, ss=1))
+    r = odo.process_frame(_frame(room, CAM, se3_exp(np.array([0.01, 0, 0, 0, 0, 0])), 33 * MS, ss=1))
+    sd = np.sqrt(np.diag(r.covariance))
+    assert sd[0] < sd[1] and sd[0] < sd[2]  # base x = camera z
+
+
+def test_distorted_camera_is_rectified(room, config):
+    raw = CameraModel(640, 480, 300.0, 300.0, 322.0, 236.0, "equidistant", (-0.02, 0.01, -0.004, 0.0005))
+    odo = Odometry(config, raw)
+    odo.process_frame(_frame(room, raw, np.eye(4), 0))
+    T_c0_c1 = se3_exp(np.array([-0.02, 0.01, 0.02, 0.0, 0.01, -0.01]))
+    r = odo.process_frame(_frame(room, raw, T_c0_c1, 33 * MS))
+    T_b_c = config.rig.T_base_rgb_matrix()
+    dt, dr = _err(r.T_odom_base, T_b_c @ T_c0_c1 @ se3_inv(T_b_c))
+    assert r.status is TrackingStatus.OK and dt < 2e-3 and dr < 0.1, (dt, dr)
+
+
+def test_loss_reinitialises_without_jump_or_nan(room, config):
+    odo = Odometry(config, CAM)
+    step = se3_exp(np.array([0.0, 0.0, 0.01, 0.0, 0.0, 0.0]))
+    poses = [np.linalg.matrix_power(step, k) for k in range(3)]
+    res = [odo.process_frame(_frame(room, CAM, T, k * 33 * MS, ss=1)) for k, T in enumerate(poses)]
+    assert res[-1].status is TrackingStatus.OK
+    # A frame without texture and without depth: nothing to track, nothing to map.
+    blank = RgbdFrame(3 * 33 * MS, np.full((480, 640, 3), 90, np.uint8), np.zeros((480, 640), np.float32))
+    lost = odo.process_frame(blank)
+    assert lost.status is TrackingStatus.LOST and np.all(np.isfinite(lost.T_odom_base))
+    # Published pose keeps moving with the motion model, never back to the origin.
+    assert np.linalg.norm(lost.T_odom_base[:3, 3] - res[-1].T_odom_base[:3, 3]) < 0.02
+    assert np.linalg.norm(lost.T_odom_base[:3, 3]) > 0.015
+    back = odo.process_frame(_frame(room, CAM, np.linalg.matrix_power(step, 4), 4 * 33 * MS, ss=1))
+    assert back.status is TrackingStatus.REINITIALISED and back.keyframe_inserted
+    nxt = odo.process_frame(_frame(room, CAM, np.linalg.matrix_power(step, 5), 5 * 33 * MS, ss=1))
+    assert nxt.status is TrackingStatus.OK
+    assert np.all(np.isfinite(nxt.T_odom_base)) and np.all(np.isfinite(nxt.covariance))
+
+
+def test_rejects_bad_input(config):
+    odo = Odometry(config, CAM)
+    with pytest.raises(ImageError):
+        odo.process_frame(RgbdFrame(0, np.zeros((240, 320, 3), np.uint8), np.zeros((240, 320), np.float32)))
+    with pytest.raises(ImageError):
+        odo.process_frame(RgbdFrame(0, np.zeros((480, 640), np.uint8), np.zeros((240, 320), np.float32)))
+    odo.process_frame(RgbdFrame(10, np.zeros((480, 640), np.uint8), np.zeros((480, 640), np.float32)))
+    with pytest.raises(TrackingError):
+        odo.process_frame(RgbdFrame(10, np.zeros((480, 640), np.uint8), np.zeros((480, 640), np.float32)))
+
+
+def test_events_are_buffered_and_bounded(config):
+    odo = Odometry(config, CAM, event_camera=config.event_camera.model())
+    for k in range(30):
+        t = np.arange(100, dtype=np.int64) * 1000 + k * 100_000_000
+        odo.add_events(EventBatch(np.zeros(100), np.zeros(100), t, np.ones(100)))
+    odo.add_events(EventBatch.empty())
+    assert sum(len(b) for b in odo._events) <= 12 * 100
