@@ -74,8 +74,8 @@ class ResidualBlock:
     def n_levels(self) -> int:
         return min(len(self.pyramid), self.patches.shape[0])
 
-    def linearise(self, level: int, T_rgb_w: np.ndarray, affine: tuple[float, float],
-                  huber: float, outlier_thr: float, grad_c: float = 0.0) -> tuple[np.ndarray, np.ndarray, float, int, int, float]:
+    def linearise(self, level: int, T_rgb_w: np.ndarray, affine: tuple[float, float], huber: float,
+                  outlier_thr: float, grad_c: float = 0.0) -> tuple[np.ndarray, np.ndarray, float, int, int, float]:
         """Normal equations (8x8 ``H``, 8 ``g``), energy, inliers, visible points, inlier SSE at ``level``."""
         cam = self.cameras[level]
         H = np.zeros((8, 8))

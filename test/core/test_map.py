@@ -45,8 +45,9 @@ def test_patches_hold_pattern_intensities_on_every_level():
     assert np.allclose(pa[0, :, 0], (img[uv[:, 1], uv[:, 0]] - 10.0) / 2.0, atol=1e-4)
 
 
-def _add(m: PointMap, n: int, T=np.eye(4)):
+def _add(m: PointMap, n: int, T=None):
     p = np.column_stack([np.zeros(n), np.zeros(n), np.full(n, 2.0)])
+    T = np.eye(4) if T is None else T
     return m.add_keyframe(len(m.keyframes), T, (0.0, 0.0), p, np.zeros((2, n, 9), np.float32))
 
 

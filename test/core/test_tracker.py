@@ -34,7 +34,8 @@ def reference(room):
     return p_c, extract_patches(pyr, uv, RGB_PATTERN)
 
 
-def _block(room, T_w_c, points_w, patches, camera=CAM, T_cam_rgb=np.eye(4), pattern=RGB_PATTERN, name="rgb"):
+def _block(room, T_w_c, points_w, patches, camera=CAM, T_cam_rgb=None, pattern=RGB_PATTERN, name="rgb"):
+    T_cam_rgb = np.eye(4) if T_cam_rgb is None else T_cam_rgb
     img, _ = room.render(camera, T_w_c @ se3_inv(T_cam_rgb), supersample=3)
     pyr = image_pyramid_with_gradients(build_pyramid(img, LEVELS))
     return ResidualBlock(name, points_w, patches, pattern, pyr, pyramid_cameras(camera, LEVELS), T_cam_rgb=T_cam_rgb)
