@@ -59,6 +59,7 @@ setup(
             "atsvo-replay = atsvo_ros.tools.replay:main",
             "atsvo-eval = atsvo_ros.tools.eval:main",
             "atsvo-demo = atsvo_ros.tools.demo:main",
+            "atsvo-sim = atsvo_ros.tools.sim:main",
         ],
     },
 )

@@ -48,11 +48,11 @@ def _room_exit(o, d_lo, d_hi, room_lo, room_hi):
 
 
 @njit(cache=True, fastmath=True)
-def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_cam, box_rot, box_lo, face_tex,
+def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_vis, box_cam, box_rot, box_lo, face_tex,
           face_tpm, face_off, face_tint, tex_data, tex_off, tex_size, light, ambient, light_ref2, out_grey,
           out_depth, out_rgb, want_rgb):
     n_pix = rays.shape[0]
-    n_box = box_c.shape[0]
+    n_vis = box_vis.shape[0]
     n_lv = tex_off.shape[1]
     ox, oy, oz = t[0], t[1], t[2]
     for i in range(n_pix):
@@ -73,15 +73,18 @@ def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_c
             face = 4 + side
         # Boxes: bounding-sphere rejection in the camera frame, then a slab test in the box frame.
         rr = cx * cx + cy * cy + cz * cz
-        for b in range(n_box):
-            proj = (box_cam[b, 0] * cx + box_cam[b, 1] * cy + box_cam[b, 2] * cz) / rr
+        inv_rr = 1.0 / rr
+        inv_r = np.sqrt(inv_rr)
+        for j in range(n_vis):
+            b = box_vis[j]
+            proj = (box_cam[b, 0] * cx + box_cam[b, 1] * cy + box_cam[b, 2] * cz) * inv_rr
             qx = box_cam[b, 0] - proj * cx
             qy = box_cam[b, 1] - proj * cy
             qz = box_cam[b, 2] - proj * cz
             rad = box_cam[b, 3]
             if qx * qx + qy * qy + qz * qz > rad * rad:
                 continue
-            if proj - rad / np.sqrt(rr) >= best:
+            if proj - rad * inv_r >= best:
                 continue
             lx = box_rot[b, 0, 0] * cx + box_rot[b, 0, 1] * cy + box_rot[b, 0, 2] * cz
             ly = box_rot[b, 1, 0] * cx + box_rot[b, 1, 1] * cy + box_rot[b, 1, 2] * cz
@@ -178,6 +181,7 @@ def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_c
         if w1 > 0.0:
             a1 = _sample(tex_data, tex_off[tid, l1], tex_size[tid, l1], u * s0 * 0.5, v * s0 * 0.5)
             albedo = albedo * (1.0 - w1) + a1 * w1
+        albedo *= 1.0 / 65535.0
         # Shading: ambient + Lambertian point light, inverse-square falloff normalised at light_ref.
         lx = light[0] - hx
         ly = light[1] - hy
@@ -216,8 +220,11 @@ class Renderer:
         self.pix_angle = np.ascontiguousarray(step / (1.0 + np.sum(xy * xy, axis=1)))
         s = scene
         self._light_ref2 = float((s.room_max[2] - s.room_min[2] - 0.5) ** 2)
+        # Half-angle of the cone holding every ray (for culling boxes outside the view).
+        self._cone_half_angle = float(np.max(np.arctan(np.hypot(xy[:, 0], xy[:, 1])))) + 0.02
+        tex16 = np.round(np.clip(s.atlas.data, 0.0, 1.0) * 65535.0).astype(np.uint16)
         self._scene_args = (s.room_min, s.room_max, s.box_center, s.box_half, np.ascontiguousarray(s.box_cos_sin),
-                            s.face_tex, s.face_texel_per_m, s.face_offset_m, s.face_tint, s.atlas.data,
+                            s.face_tex, s.face_texel_per_m, s.face_offset_m, s.face_tint, tex16,
                             s.atlas.offsets, s.atlas.sizes, s.light_pos, float(s.ambient), self._light_ref2)
         self._empty_rgb = np.zeros((0, 3), np.float32)
 
@@ -234,6 +241,10 @@ class Renderer:
         # Per-view box data: bounding spheres in the camera frame, camera->box rotations, origins.
         rel = s.box_center - t
         box_cam = np.ascontiguousarray(np.column_stack([rel @ R, np.linalg.norm(s.box_half, axis=1)]))
+        dist = np.linalg.norm(box_cam[:, :3], axis=1)
+        ang = np.arccos(np.clip(box_cam[:, 2] / np.maximum(dist, 1e-9), -1.0, 1.0))
+        slack = np.arcsin(np.clip(box_cam[:, 3] / np.maximum(dist, 1e-9), 0.0, 1.0))
+        vis = np.flatnonzero((dist <= box_cam[:, 3]) | (ang <= self._cone_half_angle + slack))
         cs, sn = s.box_cos_sin[:, 0], s.box_cos_sin[:, 1]
         Rz_inv = np.zeros((s.n_boxes, 3, 3))
         Rz_inv[:, 0, 0], Rz_inv[:, 0, 1], Rz_inv[:, 1, 0], Rz_inv[:, 1, 1] = cs, sn, -sn, cs
@@ -241,7 +252,8 @@ class Renderer:
         box_rot = np.ascontiguousarray(Rz_inv @ R)
         box_lo = np.ascontiguousarray(np.einsum("bij,bj->bi", Rz_inv, -rel))
         a = self._scene_args
-        _cast(self.rays, self.pix_angle, R, t, *a[:5], box_cam, box_rot, box_lo, *a[5:], grey, depth, col, rgb)
+        _cast(self.rays, self.pix_angle, R, t, *a[:5], vis, box_cam, box_rot, box_lo, *a[5:], grey, depth, col,
+              rgb)
         shape = (cam.height, cam.width)
         if rgb:
             return grey.reshape(shape), depth.reshape(shape), col.reshape(shape + (3,))

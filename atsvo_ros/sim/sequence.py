@@ -1,0 +1,340 @@
+"""Sequence orchestration: scene + motion + sensor models -> a time-ordered stream of sensor data.
+
+:func:`iter_sequence` is the in-memory API (tests, accuracy runs); ``atsvo-sim`` writes the same
+stream to a bag. Streams, merged by stamp:
+
+* ground truth ``GroundTruth(stamp_ns, T_world_base)`` at ``gt_rate_hz``;
+* RGB-D ``RgbdFrame(stamp_ns, rgb, depth_mm)``: the stamp is the middle of the exposure; the
+  colour image averages sub-frames spread over the exposure (no more than ``max_blur_step_px``
+  apparent motion between two), the depth is rendered at the stamp;
+* events as :class:`EventBatch` packets of ``event_packet_s``, yielded when the packet is complete
+  (merge key = packet end). The event camera is rendered at an adaptive rate: the next render time
+  is chosen so that no scene point moves more than ``EventModel.max_step_px`` between renders
+  (measured by re-projecting a grid of the last render's 3-D points with the pose change).
+
+The rig comes from a config preset: cameras, ``T_base_rgb``, ``T_rgb_event``. Physically the
+camera is mounted on the body as in ``config/synthetic.yaml``; the ground truth is reported for
+the config's base frame (for MVSEC, base = camera), so camera = ``T_world_base @ T_base_rgb``.
+"""
+from __future__ import annotations
+
+import heapq
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from atsvo_ros.config import AtsvoConfig, load_config
+from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.errors import SimulationError
+from atsvo_ros.sim.events import EventModel, EventSensor
+from atsvo_ros.sim.motion import SCENARIOS, Motion, make_motion
+from atsvo_ros.sim.render import Renderer
+from atsvo_ros.sim.rgbd import ColorSensor, DepthModel, RgbModel, depth_to_mm
+from atsvo_ros.sim.scene import Scene, make_scene
+
+LAYOUTS = ("robot", "mvsec")
+DEFAULT_START_NS = 1_700_000_000_000_000_000
+
+
+@dataclass(frozen=True)
+class SequenceSpec:
+    """Everything that defines a synthetic sequence; equal specs give identical data."""
+
+    scenario: str = "trot"
+    duration_s: float = 5.0
+    seed: int = 0
+    layout: str = "robot"
+    config: str | None = None  # preset or YAML; None = 'synthetic' (robot) or 'mvsec'
+    width: int | None = None  # colour image size (None = the config's); intrinsics scale with it
+    height: int | None = None
+    rate_hz: float = 30.0
+    exposure_s: float = 0.008
+    gt_rate_hz: float = 200.0
+    event_packet_s: float = 0.001
+    event_scale: float = 1.0  # scales the event camera (tests use tiny sensors)
+    texture_size: int = 512
+    start_ns: int = DEFAULT_START_NS
+    rgb_model: RgbModel = field(default_factory=RgbModel)
+    depth_model: DepthModel = field(default_factory=DepthModel)
+    event_model: EventModel = field(default_factory=EventModel)
+
+    def __post_init__(self) -> None:
+        if self.scenario not in SCENARIOS:
+            raise SimulationError(f"unknown scenario {self.scenario!r} (choose one of {', '.join(SCENARIOS)})")
+        if self.layout not in LAYOUTS:
+            raise SimulationError(f"unknown layout {self.layout!r} (choose one of {', '.join(LAYOUTS)})")
+        if not self.duration_s > 0 or not self.rate_hz > 0 or not self.gt_rate_hz > 0:
+            raise SimulationError("duration, frame rate and ground-truth rate must be positive")
+        if not 0 < self.event_packet_s <= 1.0:
+            raise SimulationError(f"event packet length must be in (0, 1] s, got {self.event_packet_s}")
+        if not 0.0 < self.exposure_s <= min(0.1, 1.0 / self.rate_hz):
+            raise SimulationError(f"exposure {self.exposure_s} s must be positive and fit in one frame "
+                                  f"period (1/{self.rate_hz} s)")
+        if not 0.05 <= self.event_scale <= 4.0:
+            raise SimulationError(f"event_scale must be in [0.05, 4], got {self.event_scale}")
+        for v in (self.width, self.height):
+            if v is not None and not 8 <= v <= 4096:
+                raise SimulationError(f"image size must be in [8, 4096] px, got {v}")
+
+
+@dataclass(frozen=True)
+class RgbdFrame:
+    """One colour + depth pair. ``depth_mm`` is 0 where invalid; for layout mvsec it lies on the
+    rectified (pinhole) grid of the colour camera, otherwise it is aligned to the colour image."""
+
+    stamp_ns: int
+    rgb: np.ndarray
+    depth_mm: np.ndarray
+
+    @property
+    def depth_m(self) -> np.ndarray:
+        """Depth in metres as float32, NaN where invalid."""
+        d = self.depth_mm.astype(np.float32) * 0.001
+        d[self.depth_mm == 0] = np.nan
+        return d
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Pose of the config's base frame in the world at ``stamp_ns``."""
+
+    stamp_ns: int
+    T_world_base: np.ndarray
+
+
+@dataclass(frozen=True)
+class SimRig:
+    """Cameras and extrinsics of a sequence, as written to camera_info and /tf_static."""
+
+    config: AtsvoConfig
+    rgb_camera: CameraModel
+    depth_camera: CameraModel
+    event_camera: CameraModel
+    T_base_rgb: np.ndarray
+    T_rgb_event: np.ndarray
+    T_body_rgb: np.ndarray  # physical mount of the colour camera on the robot body
+
+    @property
+    def T_base_event(self) -> np.ndarray:
+        return self.T_base_rgb @ self.T_rgb_event
+
+
+def _scaled(cam: CameraModel, sx: float, sy: float, width: int, height: int) -> CameraModel:
+    """Intrinsics of a resized image (pixel-centre convention); distortion coefficients unchanged."""
+    return CameraModel(width, height, cam.fx * sx, cam.fy * sy, (cam.cx + 0.5) * sx - 0.5, (cam.cy + 0.5) * sy - 0.5,
+                       cam.distortion_model, cam.D)
+
+
+def sequence_rig(spec: SequenceSpec) -> SimRig:
+    """The rig of a spec: config preset, resized colour camera, scaled event camera, extrinsics."""
+    cfg = load_config(spec.config or ("mvsec" if spec.layout == "mvsec" else "synthetic"))
+    rgb = cfg.rgb_camera.model()
+    w = spec.width or (round(rgb.width * spec.height / rgb.height) if spec.height else rgb.width)
+    h = spec.height or (round(rgb.height * w / rgb.width) if spec.width else rgb.height)
+    rgb = _scaled(rgb, w / rgb.width, h / rgb.height, w, h)
+    ev = cfg.event_camera.model()
+    ew, eh = max(4, round(ev.width * spec.event_scale)), max(4, round(ev.height * spec.event_scale))
+    ev = _scaled(ev, ew / ev.width, eh / ev.height, ew, eh)
+    depth_cam = rgb.pinhole() if spec.layout == "mvsec" else rgb
+    if spec.layout == "robot" and rgb.is_distorted:
+        raise SimulationError("layout robot needs an undistorted colour camera (depth is aligned to it)")
+    mount = load_config("synthetic").rig.T_base_rgb_matrix()
+    return SimRig(cfg, rgb, depth_cam, ev, cfg.rig.T_base_rgb_matrix(), cfg.rig.T_rgb_event_matrix(), mount)
+
+
+class Simulation:
+    """A sequence being generated: scene, motion, rig and the per-sensor random streams."""
+
+    def __init__(self, spec: SequenceSpec, scene: Scene | None = None) -> None:
+        self.spec = spec
+        self.rig = sequence_rig(spec)
+        self.scene = scene or make_scene(spec.seed, spec.texture_size)
+        self.motion: Motion = make_motion(spec.scenario, spec.duration_s, spec.seed, self.scene.free_xy,
+                                          t0_ns=spec.start_ns)
+        rngs = [np.random.default_rng(s) for s in np.random.SeedSequence([spec.seed, 0x5E9]).spawn(4)]
+        self._rng_rgb, self._rng_depth, self._rng_events, _ = rngs
+        dm = spec.depth_model
+        self.depth_model = replace(dm, min_m=self.rig.config.rig.depth_min_m, max_m=self.rig.config.rig.depth_max_m)
+        # Camera pose in the world = body pose x physical mount; ground truth for the config's base.
+        self._T_rgb_base = se3_inv(self.rig.T_base_rgb)
+        self.check_clearance()
+
+    # ------------------------------------------------------------------ poses
+    def T_world_rgb(self, t_ns) -> np.ndarray:
+        return self.motion.T_world_base(t_ns) @ self.rig.T_body_rgb
+
+    def T_world_event(self, t_ns) -> np.ndarray:
+        return self.T_world_rgb(t_ns) @ self.rig.T_rgb_event
+
+    def T_world_base(self, t_ns) -> np.ndarray:
+        """Ground truth: pose of the config's base frame."""
+        return self.T_world_rgb(t_ns) @ self._T_rgb_base
+
+    @property
+    def t_start_ns(self) -> int:
+        return self.motion.t0_ns
+
+    @property
+    def t_end_ns(self) -> int:
+        return self.motion.t_end_ns
+
+    def check_clearance(self, margin_m: float = 0.05) -> None:
+        """Both cameras must stay inside the room and outside every box for the whole sequence."""
+        ts = np.arange(self.t_start_ns, self.t_end_ns + 1, 10_000_000, dtype=np.int64)
+        for name, fn in (("colour", self.T_world_rgb), ("event", self.T_world_event)):
+            p = fn(ts)[:, :3, 3]
+            bad = ~self.scene.inside_free_space(p, margin_m)
+            if np.any(bad):
+                t_bad = (ts[np.argmax(bad)] - self.t_start_ns) * 1e-9
+                raise SimulationError(f"the {name} camera leaves the free space at t = {t_bad:.2f} s "
+                                      f"(scenario {self.spec.scenario}, seed {self.spec.seed}); try another seed")
+
+    # ------------------------------------------------------------------ streams
+    def ground_truth(self) -> Iterator[GroundTruth]:
+        n = int(np.floor(self.spec.duration_s * self.spec.gt_rate_hz + 1e-9)) + 1
+        stamps = self.t_start_ns + np.round(np.arange(n) * 1e9 / self.spec.gt_rate_hz).astype(np.int64)
+        for i0 in range(0, n, 256):
+            chunk = stamps[i0:i0 + 256]
+            for s, T in zip(chunk, self.T_world_base(chunk)):
+                yield GroundTruth(int(s), T)
+
+    def frames(self) -> Iterator[RgbdFrame]:
+        spec, rig = self.spec, self.rig
+        renderer = Renderer(self.scene, rig.rgb_camera)
+        depth_renderer = None if rig.depth_camera == rig.rgb_camera else Renderer(self.scene, rig.depth_camera)
+        sensor = ColorSensor(spec.rgb_model, spec.exposure_s, renderer.rays,
+                             (rig.rgb_camera.height, rig.rgb_camera.width), self._rng_rgb)
+        probe = _MotionProbe(rig.rgb_camera, renderer.rays)
+        n = int(np.floor(spec.duration_s * spec.rate_hz + 1e-9)) + 1
+        half = int(round(spec.exposure_s * 0.5e9))
+        depth_prev = None
+        for k in range(n):
+            stamp = self.t_start_ns + int(round(k * 1e9 / spec.rate_hz))
+            if depth_prev is None:
+                depth_prev = renderer.render(self.T_world_rgb(stamp))[1]
+            moved = probe.max_motion_px(depth_prev, self.T_world_rgb(stamp - half), self.T_world_rgb(stamp + half))
+            n_sub = int(np.clip(np.ceil(moved / spec.rgb_model.max_blur_step_px), 0, spec.rgb_model.max_subframes))
+            n_sub += 1 - n_sub % 2  # odd: the middle sub-frame lies at the stamp
+            times = stamp + (np.linspace(-half, half, n_sub) if n_sub > 1 else np.zeros(1)).round().astype(np.int64)
+            poses = self.T_world_rgb(times)
+            subs = []
+            for j, T in enumerate(poses):
+                _, depth, col = renderer.render(T, rgb=True)
+                subs.append(col)
+                if j == n_sub // 2:
+                    depth_prev = depth
+            rgb = sensor.expose(subs, stamp)
+            depth = depth_prev if depth_renderer is None else depth_renderer.render(poses[n_sub // 2])[1]
+            yield RgbdFrame(stamp, rgb, depth_to_mm(depth, self.depth_model, self._rng_depth))
+
+    def events(self, stats: dict | None = None) -> Iterator[EventBatch]:
+        """Event packets of ``event_packet_s`` (empty packets are skipped), in time order."""
+        spec, cam = self.spec, self.rig.event_camera
+        m = spec.event_model
+        renderer = Renderer(self.scene, cam)
+        probe = _MotionProbe(cam, renderer.rays)
+        sensor = EventSensor(m, cam.width, cam.height, self._rng_events)
+        t, t_end = self.t_start_ns, self.t_end_ns
+        T = self.T_world_event(t)
+        grey, depth = renderer.render(T)
+        sensor.reset(grey, t)
+        packet_ns = int(round(spec.event_packet_s * 1e9))
+        max_dt = max(int(m.max_render_interval_s * 1e9), 1000)
+        dt = 100_000
+        pending: list[EventBatch] = []
+        w_start = t
+        renders = 1
+        while t < t_end:
+            dt = min(int(dt * 1.5), max_dt)
+            for _ in range(8):
+                t1 = min(t + dt, t_end)
+                t1 = -(-t1 // 1000) * 1000  # renders on the microsecond grid
+                T1 = self.T_world_event(t1)
+                moved = probe.max_motion_px(depth, T, T1)
+                if moved <= m.max_step_px or dt <= 1000:
+                    break
+                dt = max(int(dt * 0.95 * m.max_step_px / moved), 1000)
+            grey, depth = renderer.render(T1)
+            renders += 1
+            batch = sensor.step(grey, t1)
+            if len(batch):
+                pending.append(batch)
+            t, T = t1, T1
+            while pending and (w_start + packet_ns <= t or t >= t_end):
+                w_end = w_start + packet_ns
+                allb = EventBatch.concatenate(pending) if len(pending) > 1 else pending[0]
+                cut = int(np.searchsorted(allb.t, w_end, side="left"))
+                out, rest = allb.select(slice(0, cut)), allb.select(slice(cut, None))
+                pending = [rest] if len(rest) else []
+                if len(out):
+                    yield out
+                w_start = w_end
+            if not pending:
+                w_start = self.t_start_ns + (t - self.t_start_ns) // packet_ns * packet_ns
+        if stats is not None:
+            stats["event_renders"] = renders
+
+
+class _MotionProbe:
+    """Largest apparent motion (px) of the scene between two camera poses, from a grid of 3-D points."""
+
+    def __init__(self, camera: CameraModel, rays: np.ndarray, step_px: int = 8) -> None:
+        self.camera = camera
+        h, w = camera.height, camera.width
+        step = max(1, min(step_px, w // 8, h // 8))
+        vv, uu = np.meshgrid(np.arange(0, h, step), np.arange(0, w, step), indexing="ij")
+        uu = np.concatenate([uu.ravel(), [w - 1, 0, w - 1, 0]])
+        vv = np.concatenate([vv.ravel(), [h - 1, h - 1, 0, 0]])
+        self.index = vv * w + uu
+        self.uv = np.column_stack([uu, vv]).astype(np.float64)
+        self.rays = rays
+
+    def max_motion_px(self, depth: np.ndarray, T_w_c0: np.ndarray, T_w_c1: np.ndarray) -> float:
+        d = depth.ravel()
+        idx = np.append(self.index, int(np.argmin(d)))
+        uv0 = np.vstack([self.uv, [idx[-1] % self.camera.width, idx[-1] // self.camera.width]])
+        p0 = self.rays[idx] * d[idx, None]
+        T = se3_inv(T_w_c1) @ T_w_c0
+        p1 = p0 @ T[:3, :3].T + T[:3, 3]
+        if np.any(p1[:, 2] < 0.02):
+            return float("inf")
+        uv1, _ = self.camera.project(p1)
+        return float(np.max(np.abs(uv1 - uv0).max(axis=1)))
+
+
+def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
+                  stats: dict | None = None) -> Iterator[RgbdFrame | EventBatch | GroundTruth]:
+    """Generate a sequence: ground truth, RGB-D frames and event packets merged in time order.
+
+    Event packets are keyed by their end (they are complete then); frames and poses by their stamp.
+    ``stats`` (optional dict) receives counters such as ``event_renders`` at the end.
+    """
+    sim = Simulation(spec, scene)
+    packet_ns = int(round(spec.event_packet_s * 1e9))
+
+    def keyed(it, order, key):
+        for item in it:
+            yield key(item), order, item
+
+    def event_key(b: EventBatch) -> int:
+        # End of the packet holding the batch (packets are aligned to the start of the sequence).
+        k = (b.t_first_ns - sim.t_start_ns) // packet_ns + 1
+        return min(sim.t_start_ns + k * packet_ns, sim.t_end_ns + 1)
+
+    streams = [keyed(sim.ground_truth(), 0, lambda g: g.stamp_ns),
+               keyed(sim.frames(), 1, lambda f: f.stamp_ns),
+               keyed(sim.events(stats), 2, event_key)]
+    for _, _, item in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
+        yield item
+
+
+def make_simulation(spec: SequenceSpec, scene: Scene | None = None) -> Simulation:
+    """A :class:`Simulation` (poses, rig, per-sensor streams) without starting the merged iterator."""
+    return Simulation(spec, scene)
+
+
+__all__ = ["GroundTruth", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation", "iter_sequence", "make_motion",
+           "make_scene", "make_simulation", "sequence_rig"]
