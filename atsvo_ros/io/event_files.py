@@ -91,16 +91,15 @@ class EventSource:
                 yield b
 
     def _iter_mvsec(self) -> Iterator[EventBatch]:
-        try:
-            from atsvo_ros.io import mvsec
-        except ImportError as exc:
-            raise DecodeError("MVSEC HDF5 support (atsvo_ros.io.mvsec) is not available") from exc
-        reader = getattr(mvsec, "iter_event_batches", None)
-        if reader is None:
-            raise DecodeError("atsvo_ros.io.mvsec has no iter_event_batches(path); cannot read MVSEC events")
-        for b in reader(self.path):
-            self._count(b)
-            yield b
+        from atsvo_ros.io.mvsec import MvsecReader
+
+        with MvsecReader(self.path) as reader:
+            if not reader.has("events"):
+                raise DecodeError(f"{self.path}: no davis/left/events dataset in this MVSEC file")
+            for item in reader.stream(("events",)):
+                b = item.data
+                self._count(b)
+                yield b
 
 
 def _rosbag2_storage(path: Path) -> Path | None:
