@@ -131,7 +131,7 @@ def make_scene(seed: int, texture_size: int = 512) -> Scene:
         yaw = float(rng.uniform(-0.3, 0.3))
         r = np.hypot(h[0], h[1])
         wall = rng.integers(4)
-        if r * 2 > band:
+        if 2 * r + 0.02 > band:  # leave room for the 2 cm clearance below
             continue
         along = rng.uniform(r, (size[0] if wall < 2 else size[1]) - r)
         across = rng.uniform(r + 0.02, band - r)
