@@ -31,33 +31,36 @@ def cache_dir(override: str | None = None) -> Path:
     return Path(env).expanduser() if env else Path.home() / ".cache" / "atsvo_ros"
 
 
-def sequence_path(cache: Path, scenario: str, duration_s: float, seed: int) -> Path:
-    """Where the bag of one (scenario, duration, seed) lives in the cache."""
-    return cache / f"sim_v{CACHE_VERSION}_{scenario}_{duration_s:g}s_seed{seed}"
+def sequence_path(cache: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = ()) -> Path:
+    """Where the bag of one (scenario, duration, seed, extra simulator options) lives in the cache."""
+    extra = "".join(f"_{a.lstrip('-')}" for a in sim_args)
+    return cache / f"sim_v{CACHE_VERSION}_{scenario}_{duration_s:g}s_seed{seed}{extra}"
 
 
-def simulate(out: Path, scenario: str, duration_s: float, seed: int) -> None:
+def simulate(out: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = (),
+             quiet: bool = False) -> None:
     """Write one synthetic sequence as an mcap bag with the simulator's CLI (``atsvo-sim``)."""
     try:
         from atsvo_ros.tools.sim import main as sim_main
     except ImportError as exc:
         raise SimulationError(f"the simulator (atsvo-sim) is not available in this install: {exc}") from None
     code = sim_main(["--scenario", scenario, "--duration", f"{duration_s:g}", "--seed", str(seed),
-                     "--out", str(out), "--format", "mcap"])
+                     "--out", str(out), "--format", "mcap", *sim_args, *(["--quiet"] if quiet else [])])
     if code:
         raise SimulationError(f"atsvo-sim failed (exit code {code}) for scenario {scenario}, {duration_s:g} s")
 
 
-def ensure_sequence(cache: Path, scenario: str, duration_s: float, seed: int, regenerate: bool = False) -> Path:
+def ensure_sequence(cache: Path, scenario: str, duration_s: float, seed: int, regenerate: bool = False,
+                    sim_args: Sequence[str] = (), quiet: bool = False) -> Path:
     """The cached bag, generated on first use (into a temporary folder, then moved: never half-written)."""
-    final = sequence_path(cache, scenario, duration_s, seed)
+    final = sequence_path(cache, scenario, duration_s, seed, sim_args)
     if final.exists() and not regenerate:
         return final
     cache.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".generating_", dir=cache))
     try:
         print(f"generating the synthetic {scenario} sequence ({duration_s:g} s, seed {seed}) into {final} ...")
-        simulate(tmp / "seq", scenario, duration_s, seed)
+        simulate(tmp / "seq", scenario, duration_s, seed, sim_args, quiet)
         if final.exists():
             shutil.rmtree(final)
         (tmp / "seq").rename(final)
@@ -91,12 +94,18 @@ def format_table(rows: list[dict[str, Any]]) -> str:
 
 
 def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT_DURATION_S, seed: int = 0,
-         cache: str | None = None, regenerate: bool = False, progress: bool | None = None) -> list[dict[str, Any]]:
-    """Generate (or reuse) the sequence, replay it in every mode, return one summary row per mode."""
+         cache: str | None = None, regenerate: bool = False, progress: bool | None = None,
+         sim_args: Sequence[str] = ()) -> list[dict[str, Any]]:
+    """Generate (or reuse) the sequence, replay it in every mode, return one summary row per mode.
+
+    ``sim_args`` are extra ``atsvo-sim`` options (e.g. ``["--width", "160"]``); they are part of
+    the cache key.
+    """
     from atsvo_ros.config import load_config
     from atsvo_ros.tools.replay import replay
 
-    bag = ensure_sequence(cache_dir(cache), scenario, duration_s, seed, regenerate)
+    bag = ensure_sequence(cache_dir(cache), scenario, duration_s, seed, regenerate, sim_args,
+                          quiet=progress is False)
     rows = []
     for mode in pipeline_modes():
         res = replay(bag, out / mode, load_config("synthetic"), mode=mode, progress=progress)
@@ -107,8 +116,12 @@ def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAUL
 
 def _main(args: argparse.Namespace) -> int:
     out = Path(args.out)
+    sim_args: list[str] = []
+    for flag in ("width", "height", "event_scale"):
+        if getattr(args, flag) is not None:
+            sim_args += [f"--{flag.replace('_', '-')}", f"{getattr(args, flag):g}"]
     rows = demo(out, args.scenario, args.duration, args.seed, args.cache, args.regenerate,
-                progress=False if args.no_progress else None)
+                progress=False if args.no_progress else None, sim_args=sim_args)
     print(f"\n{args.scenario}, {args.duration:g} s, seed {args.seed} (synthetic, ground truth known)")
     print(format_table(rows))
     print(f"\ntrajectories, metrics.json and plots in {out}/<mode>/")
@@ -126,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", default="atsvo_demo", help="output directory (default ./atsvo_demo)")
     parser.add_argument("--cache", help="cache directory (default $ATSVO_CACHE or ~/.cache/atsvo_ros)")
     parser.add_argument("--regenerate", action="store_true", help="regenerate the cached sequence")
+    parser.add_argument("--width", type=int, help="colour image width (default 640; smaller is faster)")
+    parser.add_argument("--height", type=int, help="colour image height (default 480)")
+    parser.add_argument("--event-scale", type=float, help="event sensor scale (default 1; smaller is faster)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     return parser
 

@@ -20,7 +20,7 @@ from test.tools.test_replay import FakeOdometry
 def fake_world(monkeypatch):
     calls = []
 
-    def fake_simulate(out, scenario, duration_s, seed):
+    def fake_simulate(out, scenario, duration_s, seed, sim_args=(), quiet=False):
         calls.append((scenario, duration_s, seed))
         write_bag(out, "mcap", n_frames=8)
 
@@ -52,7 +52,7 @@ def test_demo_generates_once_and_prints_table(tmp_path, fake_world, capsys, monk
 
 
 def test_failed_generation_leaves_no_cache(tmp_path, monkeypatch, capsys):
-    def broken(out, scenario, duration_s, seed):
+    def broken(out, scenario, duration_s, seed, sim_args=(), quiet=False):
         out.mkdir(parents=True)
         (out / "partial").write_text("x")
         raise SimulationError("boom")
@@ -66,3 +66,16 @@ def test_failed_generation_leaves_no_cache(tmp_path, monkeypatch, capsys):
 def test_table_formats_missing_metrics():
     text = demo_mod.format_table([{"mode": "rgbd", "metrics": None, "rtf": 1.5}])
     assert "n/a" in text and "1.50" in text
+
+
+def test_demo_end_to_end_with_the_real_simulator_and_odometry(tmp_path, capsys):
+    pytest.importorskip("atsvo_ros.tools.sim")
+    argv = ["--scenario", "trot", "--duration", "0.6", "--width", "160", "--height", "120", "--event-scale", "0.25",
+            "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out"), "--no-progress"]
+    assert demo_mod.main(argv) == 0
+    text = capsys.readouterr().out
+    for mode in demo_mod.pipeline_modes():
+        doc = json.loads((tmp_path / "out" / mode / "metrics.json").read_text())
+        assert doc["n_matched"] >= 15
+        line = next(ln for ln in text.splitlines() if ln.startswith(mode))
+        assert f"{doc['ate_rmse_m'] * 100:.2f}" in line
