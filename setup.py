@@ -41,12 +41,15 @@ setup(
         "mvsec": ["h5py>=3.8"],
         # Cross-checking metrics against evo (GPL-3.0: optional, evaluation only).
         "eval": ["evo>=1.20"],
+        # Benchmarks against iniVation's C++ library (atsvo-bench events).
+        "bench": ["dv-processing>=2.0"],
         "test": [
             "pytest>=7",
             "ruff>=0.4",
             "aedat>=2.0",
             "h5py>=3.8",
             "evo>=1.20",
+            "dv-processing>=2.0",
         ],
     },
     zip_safe=True,
@@ -56,10 +59,14 @@ setup(
     entry_points={
         "console_scripts": [
             "atsvo-info = atsvo_ros.tools.info:main",
+            # ROS 2 executables (`ros2 run atsvo_ros tracking_node`); need rclpy at run time.
+            "tracking_node = atsvo_ros.nodes.tracking_node:main",
             "atsvo-replay = atsvo_ros.tools.replay:main",
             "atsvo-eval = atsvo_ros.tools.eval:main",
             "atsvo-demo = atsvo_ros.tools.demo:main",
             "atsvo-sim = atsvo_ros.tools.sim:main",
+            "atsvo-events = atsvo_ros.tools.events:main",
+            "atsvo-bench = atsvo_ros.tools.bench:main",
         ],
     },
 )
