@@ -11,8 +11,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_launch_file_starts_installed_executables():
     tree = ast.parse((ROOT / "launch" / "atsvo.launch.py").read_text())
-    executables = {kw.value.value for node in ast.walk(tree) if isinstance(node, ast.keyword)
-                   and node.arg == "executable" for kw in [node]}
+    executables = {node.value.value for node in ast.walk(tree)
+                   if isinstance(node, ast.keyword) and node.arg == "executable"}
     setup = (ROOT / "setup.py").read_text()
     assert executables == {"tracking_node"}
     for exe in executables:
