@@ -23,12 +23,26 @@ def _plt():
 
 
 def rpy_deg(T: np.ndarray) -> np.ndarray:
-    """Roll, pitch, yaw (ZYX, degrees, unwrapped over time) of (N, 4, 4) poses."""
+    """Roll, pitch, yaw (ZYX, degrees) of (N, 4, 4) poses, continuous over time.
+
+    Each rotation has two ZYX solutions, ``(r, p, y)`` and ``(r + 180, 180 - p, y + 180)``; the one
+    nearest the previous sample is kept, so a flip through pitch 90 deg (a backflip) is drawn as a
+    continuous curve instead of jumps of 180 deg.
+    """
     R = T[:, :3, :3]
-    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
-    pitch = np.arcsin(np.clip(-R[:, 2, 0], -1.0, 1.0))
-    yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
-    return np.degrees(np.unwrap(np.stack([roll, pitch, yaw], 1), axis=0))
+    a = np.stack([np.arctan2(R[:, 2, 1], R[:, 2, 2]), np.arcsin(np.clip(-R[:, 2, 0], -1.0, 1.0)),
+                  np.arctan2(R[:, 1, 0], R[:, 0, 0])], 1)
+    b = np.stack([a[:, 0] + np.pi, np.pi - a[:, 1], a[:, 2] + np.pi], 1)
+    out = np.empty_like(a)
+    prev = None
+    for i in range(len(a)):  # sequential by nature: each choice depends on the previous one
+        best = None
+        for cand in (a[i], b[i]):
+            c = cand if prev is None else prev + (cand - prev + np.pi) % (2 * np.pi) - np.pi
+            if best is None or (prev is not None and np.abs(c - prev).sum() < np.abs(best - prev).sum()):
+                best = c
+        out[i] = prev = best
+    return np.degrees(out)
 
 
 def _series(est: Trajectory, result: EvalResult | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
