@@ -131,10 +131,13 @@ class TrackerConfig:
     """Coarse-to-fine photometric alignment (Eq. 4)."""
 
     pyramid_levels: int = _f(4, 1, 8)
+    coarse_level_points: int = _f(300, 0, 100000,
+                                  doc="map points used on level l > 0: max(this, N / 4^l), 0 = all (speed)")
     max_iterations: int = _f(20, 1, 200, doc="Gauss-Newton/LM iterations per pyramid level")
     huber_delta: float = _f(9.0, 0.0, 255.0, lo_open=True, doc="Huber threshold on the patch residual (intensity)")
     outlier_threshold: float = _f(40.0, 0.0, 1000.0, lo_open=True, doc="residual above which a point is an outlier")
-    convergence_eps: float = _f(1e-5, 0.0, 1.0, lo_open=True, doc="stop when the update norm falls below this")
+    convergence_eps: float = _f(1e-4, 0.0, 1.0, lo_open=True,
+                                doc="stop when the update norm (m, rad) falls below this (x2 per pyramid level)")
     w_rgb: float = _f(1.0, 0.0, 1e6, doc="omega_1 of Eq. 4")
     w_event: float = _f(1.0, 0.0, 1e6, doc="omega_2 of Eq. 4 (0 = RGB only)")
     motion_threshold_rot_deg: float = _f(3.0, 0.0, 180.0, doc="inter-frame rotation that activates event fusion")

@@ -23,8 +23,9 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
     Huber-weighted ``J^T W J`` and ``J^T W r``, and ``state`` per point. Pixels are further weighted
     by ``c^2 / (c^2 + |grad I|^2)`` (``grad_c2`` = c^2, 0 = off), DSO's guard against edges whose
     sub-pixel blur and occlusions make them unreliable. Returns
-    ``(energy, n_inliers, n_visible, sum of inlier squared residuals)``. Invisible points and
-    outliers add a constant energy so energies of different estimates stay comparable.
+    ``(energy, n_inliers, n_visible, sum of inlier squared residuals)``. Outliers add a constant
+    energy (the Huber cost of a patch at the threshold) and invisible points none, so the energy
+    per visible point compares estimates fairly (as DSO's coarse tracker does).
     """
     n = pts_w.shape[0]
     npat = pattern.shape[0]
@@ -63,14 +64,12 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
         qz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + T_cr[2, 3]
         if qz < 1e-3:
             state[i] = INVISIBLE
-            energy += fixed
             continue
         iz = 1.0 / qz
         u = fx * qx * iz + cx
         v = fy * qy * iz + cy
         if not (u >= border and v >= border and u <= w - 1 - border and v <= h - 1 - border):
             state[i] = INVISIBLE
-            energy += fixed
             continue
         n_vis += 1
         sse = 0.0
@@ -208,3 +207,19 @@ def _project_points(pts_w, T_cw, fx, fy, cx, cy):  # pragma: no cover - compiled
         uv[i, 0] = fx * px * iz + cx
         uv[i, 1] = fy * py * iz + cy
     return uv, z
+
+
+@njit(cache=True)
+def _gradient_stack(img):  # pragma: no cover - compiled
+    """(H, W, 3) float32 ``[I, dI/dx, dI/dy]`` with central differences (0 on the border)."""
+    h, w = img.shape
+    out = np.zeros((h, w, 3), dtype=np.float32)
+    for y in range(h):
+        for x in range(w):
+            out[y, x, 0] = img[y, x]
+        for x in range(1, w - 1):
+            out[y, x, 1] = 0.5 * (img[y, x + 1] - img[y, x - 1])
+        if 0 < y < h - 1:
+            for x in range(w):
+                out[y, x, 2] = 0.5 * (img[y + 1, x] - img[y - 1, x])
+    return out

@@ -10,7 +10,7 @@ weight, camera, ``T_event_rgb`` and 14-pixel pattern without touching this solve
 
 The solver is Levenberg-Marquardt with Huber weights, per-point outlier rejection (the RMS
 residual of a patch above ``outlier_threshold``), a convergence test on the update norm, and
-several initial guesses (constant motion, zero motion) evaluated at the coarsest level.
+several initial guesses (constant motion, zero motion) compared at the coarsest level.
 """
 from __future__ import annotations
 
@@ -21,7 +21,6 @@ import numpy as np
 from atsvo_ros.config import TrackerConfig
 from atsvo_ros.core import _track_kernels as kernels
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.geometry import se3_exp
 from atsvo_ros.errors import TrackingError
 
 
@@ -41,6 +40,9 @@ class ResidualBlock:
         estimate_affine: whether the block has its own gain/offset parameters.
         border_px: projections closer than this to the image edge are not used (default: pattern
             radius + 1, the least that keeps bilinear reads inside the image).
+        coarse_points: on level ``l > 0`` use an evenly strided subset of ``max(coarse_points, N / 4^l)``
+            points (0 = all): coarse levels only need to bring the estimate into the basin of the
+            next level, and their pixels are 4x fewer per level anyway.
     """
 
     name: str
@@ -53,6 +55,7 @@ class ResidualBlock:
     weight: float = 1.0
     estimate_affine: bool = True
     border_px: float | None = None
+    coarse_points: int = 0
 
     def __post_init__(self) -> None:
         self.points_w = np.ascontiguousarray(self.points_w, dtype=np.float64).reshape(-1, 3)
@@ -69,6 +72,23 @@ class ResidualBlock:
         if self.border_px is None:  # the pattern plus the bilinear neighbour must stay inside
             self.border_px = float(np.abs(self.pattern).max(initial=0.0)) + 1.0
         self.state = np.zeros(n, dtype=np.int8)
+        self._subsets: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def _level_data(self, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Points, patches and state array used on ``level`` (a strided subset on coarse levels)."""
+        n = len(self.points_w)
+        keep = n if level == 0 or self.coarse_points <= 0 else max(self.coarse_points, n >> (2 * level))
+        if keep >= n:
+            patches = self.patches[level]
+            if not patches.flags.c_contiguous:
+                patches = np.ascontiguousarray(patches)
+            return self.points_w, patches, self.state
+        if level not in self._subsets:
+            stride = n / keep
+            idx = np.floor(np.arange(keep) * stride).astype(np.int64)
+            self._subsets[level] = (np.ascontiguousarray(self.points_w[idx]),
+                                    np.ascontiguousarray(self.patches[level][idx]), np.zeros(keep, np.int8))
+        return self._subsets[level]
 
     @property
     def n_levels(self) -> int:
@@ -80,13 +100,11 @@ class ResidualBlock:
         cam = self.cameras[level]
         H = np.zeros((8, 8))
         g = np.zeros(8)
-        patches = self.patches[level]
-        if not patches.flags.c_contiguous:
-            patches = np.ascontiguousarray(patches)
+        points, patches, state = self._level_data(level)
         e, n_in, n_vis, sse = kernels._linearise(
-            self.points_w, patches, self.pyramid[level], self.pattern, cam.fx, cam.fy, cam.cx, cam.cy,
+            points, patches, self.pyramid[level], self.pattern, cam.fx, cam.fy, cam.cx, cam.cy,
             np.ascontiguousarray(T_rgb_w), self.T_cam_rgb, float(np.exp(affine[0])), float(affine[1]),
-            float(huber), float(outlier_thr), float(self.border_px), float(grad_c) ** 2, H, g, self.state)
+            float(huber), float(outlier_thr), float(self.border_px), float(grad_c) ** 2, H, g, state)
         return H * self.weight, g * self.weight, e * self.weight, int(n_in), int(n_vis), float(sse)
 
 
@@ -154,12 +172,24 @@ class Tracker:
             H[i, i] += 1e-3 * max(1, n_in)
         return H, g, energy, n_in, n_vis, n_res, sse, n_aff
 
-    def _optimise_level(self, blocks, level, T, affine, thr):
+    def _optimise_level(self, blocks, level, T, affine):
+        """LM at one level. The outlier threshold is relaxed (x2, up to x4) while most visible points
+        are outliers (a poor initial guess); convergence is an update below ``convergence_eps``
+        scaled by the level's pixel size."""
         cfg = self.config
-        H, g, E, n_in, n_vis, n_res, sse, aff_blocks = self._system(blocks, level, T, affine, thr)
+        thr = cfg.outlier_threshold
+        sysm = self._system(blocks, level, T, affine, thr)
+        for _ in range(2):
+            if sysm[4] == 0 or sysm[3] >= 0.5 * sysm[4]:
+                break
+            thr *= 2.0
+            sysm = self._system(blocks, level, T, affine, thr)
+        H, g, E, n_in, n_vis, n_res, sse, aff_blocks = sysm
+        eps = cfg.convergence_eps * (2.0 ** level)
         lam = 1e-4
         iters = 0
         converged = False
+        fresh = True  # the blocks' point states belong to the current estimate
         for _ in range(cfg.max_iterations):
             iters += 1
             if n_in < 6:
@@ -171,34 +201,28 @@ class Tracker:
                 break
             if not np.all(np.isfinite(delta)):
                 break
-            T_new = se3_exp(delta[:6]) @ T
+            T_new = _exp(delta[:6]) @ T
             aff_new = dict(affine)
             for j, blk in enumerate(aff_blocks):
                 a, b = affine[blk.name]
                 aff_new[blk.name] = (a + delta[6 + 2 * j], b + delta[7 + 2 * j])
             Hn, gn, En, ni, nv, nr, sn, _ = self._system(blocks, level, T_new, aff_new, thr)
-            if En < E:
+            small = float(np.sqrt(delta[:6] @ delta[:6])) < eps
+            if nv > 0 and En / nv < E / max(n_vis, 1):
+                gain = 1.0 - (En / nv) / max(E / max(n_vis, 1), 1e-12)
                 T, affine, H, g, E, n_in, n_vis, n_res, sse = T_new, aff_new, Hn, gn, En, ni, nv, nr, sn
+                fresh = True
                 lam = max(lam * 0.25, 1e-7)
-                if np.linalg.norm(delta[:6]) < cfg.convergence_eps:
+                if small or gain < 1e-4:
                     converged = True
                     break
             else:
+                fresh = False
                 lam *= 8.0
-                if lam > 1e3 or np.linalg.norm(delta[:6]) < cfg.convergence_eps:
-                    converged = np.linalg.norm(delta[:6]) < cfg.convergence_eps
+                if lam > 1e3 or small:
+                    converged = small
                     break
-        return T, affine, H, g, E, n_in, n_vis, n_res, sse, iters, converged
-
-    def _level_threshold(self, blocks, level, T, affine) -> float:
-        """Outlier threshold for a level: relaxed (x2, up to x4) while most visible points are outliers."""
-        thr = self.config.outlier_threshold
-        for _ in range(2):
-            _, _, _, n_in, n_vis, _, _, _ = self._system(blocks, level, T, affine, thr)
-            if n_vis == 0 or n_in >= 0.5 * n_vis:
-                break
-            thr *= 2.0
-        return thr
+        return T, affine, H, g, E, n_in, n_vis, n_res, sse, iters, converged, fresh, thr
 
     def track(self, blocks: list[ResidualBlock], guesses: list[np.ndarray],
               affine: dict[str, tuple[float, float]] | None = None) -> TrackResult:
@@ -207,7 +231,7 @@ class Tracker:
         Args:
             blocks: residual blocks (RGB first); their pyramids hold the current images.
             guesses: candidate initial ``T_rgb_w`` (e.g. constant motion, zero motion); each is
-                optimised at the coarsest level and the lowest energy wins.
+                evaluated at the coarsest level and the lowest energy per visible point wins.
             affine: initial ``(a, b)`` per block name (default zeros).
         """
         if not blocks or not guesses:
@@ -215,26 +239,30 @@ class Tracker:
         affine = {b.name: (affine or {}).get(b.name, (0.0, 0.0)) for b in blocks}
         n_levels = max(b.n_levels for b in blocks)
         top = n_levels - 1
-        best = None
+        # Evaluate every guess at the coarsest level; energy per visible point (outliers pay a
+        # constant) picks the guess that explains the image best, which is then optimised.
+        best, best_e = None, np.inf
         for gi, T0 in enumerate(guesses):
             T0 = np.asarray(T0, dtype=np.float64)
             if not np.all(np.isfinite(T0)):
                 continue
-            thr = self._level_threshold(blocks, top, T0, affine)
-            out = self._optimise_level(blocks, top, T0, dict(affine), thr)
-            # Compare candidates by energy per point (all points pay, so this is fair).
-            if best is None or out[4] < best[1][4]:
-                best = (gi, out)
+            e, n_vis = self._system(blocks, top, T0, affine, self.config.outlier_threshold)[2:5:2]
+            if n_vis > 0 and e / n_vis < best_e:
+                best, best_e = gi, e / n_vis
         if best is None:
-            raise TrackingError("every initial guess contains NaN")
-        gi, (T, aff, H, g, E, n_in, n_vis, n_res, sse, iters, conv) = best
-        total_iters = iters
+            raise TrackingError("no initial guess sees any map point (or every guess contains NaN)")
+        gi = best
+        out = self._optimise_level(blocks, top, np.asarray(guesses[gi], dtype=np.float64), dict(affine))
+        total_iters = out[9]
+        fresh = False
         for level in range(top - 1, -1, -1):
-            thr = self._level_threshold(blocks, level, T, aff)
-            T, aff, H, g, E, n_in, n_vis, n_res, sse, it, conv = self._optimise_level(blocks, level, T, aff, thr)
-            total_iters += it
-        # Refresh block states/H at the final estimate (the last rejected step may have overwritten them).
-        H, g, E, n_in, n_vis, n_res, sse, _ = self._system(blocks, 0, T, aff, self.config.outlier_threshold)
+            out = self._optimise_level(blocks, level, out[0], out[1])
+            total_iters += out[9]
+            fresh = out[11]
+        T, aff, H, g, E, n_in, n_vis, n_res, sse, _, conv, _, thr = out
+        if not fresh or top == 0:
+            # Point states and H must belong to the final estimate (a rejected step overwrote them).
+            H, g, E, n_in, n_vis, n_res, sse, _ = self._system(blocks, 0, T, aff, thr)
         cov = self._covariance(H, n_res, sse)
         states = {b.name: b.state.copy() for b in blocks}
         n_points = sum(len(b.points_w) for b in blocks)
@@ -256,17 +284,26 @@ class Tracker:
         return 0.5 * (cov + cov.T)
 
 
+def _exp(xi: np.ndarray) -> np.ndarray:
+    """SE(3) exponential of a small twist (translation first); scalar maths, no broadcasting overhead."""
+    rho, w = xi[:3], xi[3:]
+    th2 = float(w @ w)
+    W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    W2 = W @ W
+    if th2 < 1e-12:
+        a, b, c = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0, 1.0 / 6.0 - th2 / 120.0
+    else:
+        th = np.sqrt(th2)
+        a, b, c = np.sin(th) / th, (1.0 - np.cos(th)) / th2, (th - np.sin(th)) / (th2 * th)
+    T = np.eye(4)
+    T[:3, :3] += a * W + b * W2
+    T[:3, 3] = (np.eye(3) + b * W + c * W2) @ rho
+    return T
+
+
 def image_pyramid_with_gradients(pyramid: list[np.ndarray]) -> list[np.ndarray]:
     """Stack each level with its central-difference gradients: (H, W, 3) float32 ``[I, Ix, Iy]``."""
-    out = []
-    for img in pyramid:
-        img = np.asarray(img, dtype=np.float32)
-        stack = np.zeros(img.shape + (3,), dtype=np.float32)
-        stack[..., 0] = img
-        stack[:, 1:-1, 1] = 0.5 * (img[:, 2:] - img[:, :-2])
-        stack[1:-1, :, 2] = 0.5 * (img[2:, :] - img[:-2, :])
-        out.append(stack)
-    return out
+    return [kernels._gradient_stack(np.ascontiguousarray(img, dtype=np.float32)) for img in pyramid]
 
 
 __all__ = ["ResidualBlock", "TrackResult", "Tracker", "image_pyramid_with_gradients"]
