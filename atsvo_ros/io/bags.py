@@ -315,19 +315,19 @@ class Bag:
 
     def first_messages(self, roles: Iterable[str]) -> dict[str, Any]:
         """The first deserialized message of each role present (reads only until all are found)."""
-        by_topic = {t: r for r, t in self.selection.items() if r in set(roles)}
-        conns = [c for c in self.reader.connections if c.topic in by_topic]
+        wanted = {r: t for r, t in self.selection.items() if r in set(roles)}
+        conns = [c for c in self.reader.connections if c.topic in set(wanted.values())]
         found: dict[str, Any] = {}
         if not conns:
             return found
         for conn, _, raw in self._raw(conns):
-            role = by_topic[conn.topic]
-            if role not in found:
-                try:
-                    found[role] = self.reader.deserialize(raw, conn.msgtype)
-                except Exception as exc:
-                    raise BagError(f"cannot decode a {conn.msgtype} message on {conn.topic}: {exc}") from None
-            if len(found) == len(by_topic):
+            for role, topic in wanted.items():  # one topic may serve two roles (MVSEC camera_info)
+                if topic == conn.topic and role not in found:
+                    try:
+                        found[role] = self.reader.deserialize(raw, conn.msgtype)
+                    except Exception as exc:
+                        raise BagError(f"cannot decode a {conn.msgtype} message on {conn.topic}: {exc}") from None
+            if len(found) == len(wanted):
                 break
         return found
 

@@ -249,3 +249,11 @@ def test_static_tf_chain(bags):
     np.testing.assert_allclose(T[:3, 0], [0, -1, 0], atol=1e-9)
     np.testing.assert_allclose(T[:3, 3], [0.2, 0, 0.08], atol=1e-12)
     assert tf.lookup("base_link", "nowhere") is None
+
+
+def test_one_topic_serving_two_roles(bags):
+    info = TOPICS["rgb_info"]
+    with Bag(bags["mcap"], topics={"event_info": info}) as bag:
+        first = bag.first_messages(["rgb", "rgb_info", "event_info"])
+        assert set(first) == {"rgb", "rgb_info", "event_info"}
+        assert first["rgb_info"].width == 32
