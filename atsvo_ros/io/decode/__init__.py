@@ -21,6 +21,7 @@ import numpy as np
 
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.errors import DecodeError
+from atsvo_ros.io.decode._kernels import _count_backwards, _keep_forward
 from atsvo_ros.io.decode.dvs import decode_dvs_message, decode_dvs_raw
 from atsvo_ros.io.decode.packet import ENCODINGS, Evt3State, LibcaerState, PacketResult, decode_packet
 from atsvo_ros.io.decode.packet_msg import PacketFields, packet_fields_from_message, parse_packet_raw
@@ -196,14 +197,10 @@ class EventDecoder:
             self.stats.dropped_out_of_range += n_oob
             self._warn("oob", f"dropped {n_oob} events outside the {w}x{h} sensor")
         if self.drop_backwards and len(t):
-            prev = np.maximum.accumulate(t)
-            keep = np.empty(len(t), bool)
-            keep[0] = True
-            np.greater_equal(t[1:], prev[:-1], out=keep[1:])
-            if self._last_t is not None:
-                keep &= t >= self._last_t
-            if not keep.all():
-                n_back = int(len(keep) - np.count_nonzero(keep))
+            last = self._last_t if self._last_t is not None else np.iinfo(np.int64).min
+            n_back = int(_count_backwards(t, last))
+            if n_back:
+                keep = _keep_forward(t, last)
                 self.stats.dropped_backwards += n_back
                 self._warn("back", f"dropped {n_back} events whose time went backwards")
                 x, y, t, p = x[keep], y[keep], t[keep], p[keep]

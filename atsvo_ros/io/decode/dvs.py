@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from atsvo_ros.errors import DecodeError
+from atsvo_ros.io.decode._kernels import _dvs_fields
 from atsvo_ros.io.decode.layout import ROS1_DVS_EVENT, align, dvs_cdr_layout
 
 
@@ -60,9 +61,16 @@ def parse_cdr_header(buf: memoryview) -> tuple[str, int, str, int]:
     return e, sec * 1_000_000_000 + nsec, frame_id, pos + n
 
 
-def _from_struct(ev: np.ndarray, width: int, height: int) -> tuple[np.ndarray, ...]:
-    t = ev["sec"].astype(np.int64) * 1_000_000_000 + ev["nsec"].astype(np.int64)
-    return ev["x"].astype(np.uint16), ev["y"].astype(np.uint16), t, (ev["p"] != 0).astype(np.uint8)
+def _alloc(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    return np.empty(n, np.uint16), np.empty(n, np.uint16), np.empty(n, np.int64), np.empty(n, np.uint8)
+
+
+def _fill(ev: np.ndarray, out: tuple[np.ndarray, ...], offset: int) -> None:
+    """Copy a structured dvs Event view into ``out`` from ``offset`` (one numba pass, native order)."""
+    fields = [ev[f] for f in ("x", "y", "sec", "nsec", "p")]
+    if ev.dtype["x"].byteorder == ">":
+        fields = [f.astype(f.dtype.newbyteorder("=")) for f in fields]
+    _dvs_fields(*fields, *out, offset)
 
 
 def decode_dvs_raw(rawdata: bytes | memoryview, ros_version: int) -> DvsArray:
@@ -74,9 +82,9 @@ def decode_dvs_raw(rawdata: bytes | memoryview, ros_version: int) -> DvsArray:
         height, width, n = struct.unpack_from("<III", buf, pos)
         pos += 12
         _need(buf, pos + 13 * n, f"{n} events")
-        ev = np.frombuffer(buf, ROS1_DVS_EVENT, count=n, offset=pos)
-        x, y, t, p = _from_struct(ev, width, height)
-        return DvsArray(stamp, frame_id, width, height, x, y, t, p)
+        out = _alloc(n)
+        _fill(np.frombuffer(buf, ROS1_DVS_EVENT, count=n, offset=pos), out, 0)
+        return DvsArray(stamp, frame_id, width, height, *out)
     e, stamp, frame_id, pos = parse_cdr_header(buf)
     pos = align(pos, 4)
     _need(buf, 4 + pos + 12, "height/width/length")
@@ -93,24 +101,19 @@ def decode_dvs_raw(rawdata: bytes | memoryview, ros_version: int) -> DvsArray:
     y0, = struct.unpack_from(f"{e}H", buf, f[1])
     s0, = struct.unpack_from(f"{e}i", buf, f[2])
     ns0, = struct.unpack_from(f"{e}I", buf, f[3])
-    p0 = buf[f[4]]
-    x = np.empty(n, np.uint16)
-    y = np.empty(n, np.uint16)
-    t = np.empty(n, np.int64)
-    p = np.empty(n, np.uint8)
-    x[0], y[0], t[0], p[0] = x0, y0, s0 * 1_000_000_000 + ns0, p0 != 0
+    out = _alloc(n)
+    x, y, t, p = out
+    x[0], y[0], t[0], p[0] = x0, y0, s0 * 1_000_000_000 + ns0, buf[f[4]] != 0
     if n > 1:
-        # the last element may lack its trailing padding: view n-2 full strides + the last one separately
+        # the last element may lack its trailing padding: view whole strides, then the last one apart
         start = 4 + lay.rest_start
-        avail = len(buf) - start
-        m_full = min(n - 1, avail // lay.stride)
-        ev = np.frombuffer(buf, lay.dtype(e == ">"), count=m_full, offset=start)
-        x[1:1 + m_full], y[1:1 + m_full], t[1:1 + m_full], p[1:1 + m_full] = _from_struct(ev, width, height)
+        m_full = min(n - 1, (len(buf) - start) // lay.stride)
+        _fill(np.frombuffer(buf, lay.dtype(e == ">"), count=m_full, offset=start), out, 1)
         if m_full < n - 1:
             last = np.zeros(1, lay.dtype(e == ">"))
             tail = bytes(buf[start + m_full * lay.stride:])
             last.view(np.uint8)[: len(tail)] = np.frombuffer(tail, np.uint8)
-            x[-1:], y[-1:], t[-1:], p[-1:] = _from_struct(last, width, height)
+            _fill(last, out, n - 1)
     return DvsArray(stamp, frame_id, width, height, x, y, t, p)
 
 

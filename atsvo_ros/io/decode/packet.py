@@ -50,8 +50,7 @@ class LibcaerState:
     """Roll-over tracking of the 31-bit libcaer microsecond counter across packets."""
 
     time_base: int | None = None
-    last_ts_us: int = -1
-    n_rollovers: int = 0
+    slots: np.ndarray = field(default_factory=lambda: np.array([-1, 0], np.int64))  # last stamp, roll-overs
 
 
 @dataclass
@@ -69,36 +68,20 @@ def as_bytes_array(payload: bytes | bytearray | memoryview | np.ndarray) -> np.n
 
 
 def _words(buf: np.ndarray, size: int, big_endian: bool) -> tuple[np.ndarray, int]:
+    """Native-order unsigned words of ``size`` bytes and the number of trailing bytes."""
     n = buf.shape[0] // size
     trailing = buf.shape[0] - n * size
     dtype = np.dtype(f"{'>' if big_endian else '<'}u{size}")
-    return buf[: n * size].view(dtype) if n else np.zeros(0, dtype), trailing
-
-
-def _crop(res: PacketResult, width: int, height: int) -> PacketResult:
-    if not (width and height) or len(res.x) == 0:
-        return res
-    ok = (res.x < width) & (res.y < height)
-    if ok.all():
-        return res
-    res.n_out_of_range += int(len(ok) - np.count_nonzero(ok))
-    res.x, res.y, res.t, res.p = res.x[ok], res.y[ok], res.t[ok], res.p[ok]
-    return res
+    words = buf[: n * size].view(dtype) if n else np.zeros(0, dtype)
+    return (words.astype(f"=u{size}") if big_endian else words), trailing
 
 
 def decode_libcaer_cmp(payload, time_base_ns: int, width: int = 0, height: int = 0,
                        big_endian: bool = False) -> PacketResult:
     """Decode a libcaer_cmp packet (16-bit words; see module docstring)."""
     words, trailing = _words(as_bytes_array(payload), 2, big_endian)
-    if words.dtype.byteorder == ">":
-        words = words.astype(np.uint16)
-    n, unknown = kern._libcaer_cmp_count(words)
-    xs = np.empty(n, np.uint16)
-    ys = np.empty(n, np.uint16)
-    ts = np.empty(n, np.int64)
-    ps = np.empty(n, np.uint8)
-    kern._libcaer_cmp_fill(words, int(time_base_ns), 1000, xs, ys, ts, ps)
-    return _crop(PacketResult(xs, ys, ts, ps, n_unknown_words=unknown, n_trailing_bytes=trailing), width, height)
+    x, y, t, p, oob, unknown = kern._libcaer_cmp(words, int(time_base_ns), int(width), int(height))
+    return PacketResult(x, y, t, p, n_out_of_range=oob, n_unknown_words=unknown, n_trailing_bytes=trailing)
 
 
 def decode_libcaer(payload, time_base_ns: int, width: int = 0, height: int = 0, big_endian: bool = False,
@@ -111,54 +94,34 @@ def decode_libcaer(payload, time_base_ns: int, width: int = 0, height: int = 0, 
     buf = as_bytes_array(payload)
     n = buf.shape[0] // 8
     trailing = buf.shape[0] - 8 * n
-    e = "<" if not big_endian else ">"
+    e = ">" if big_endian else "<"
     rec = buf[: 8 * n].view(np.dtype([("d", f"{e}u4"), ("ts", f"{e}i4")]))
-    data = rec["d"]
-    ts_us = rec["ts"].astype(np.int64)
-    wraps = np.zeros(n, np.int64)
-    if n > 1:
-        np.cumsum(ts_us[1:] < ts_us[:-1], out=wraps[1:])
-    if state is not None:
-        if state.time_base != time_base_ns:
-            state.time_base, state.last_ts_us, state.n_rollovers = int(time_base_ns), -1, 0
-        if n:
-            if ts_us[0] < state.last_ts_us:
-                state.n_rollovers += 1
-            wraps += state.n_rollovers
-            state.n_rollovers = int(wraps[-1])
-            state.last_ts_us = int(ts_us[-1])
-    t = int(time_base_ns) + (ts_us + wraps * LIBCAER_ROLLOVER_US) * 1000
-    x = ((data >> 17) & 0x7FFF).astype(np.uint16)
-    y = ((data >> 2) & 0x7FFF).astype(np.uint16)
-    p = ((data >> 1) & 1).astype(np.uint8)
-    return _crop(PacketResult(x, y, t, p, n_trailing_bytes=trailing), width, height)
+    data, stamp = rec["d"], rec["ts"]
+    if big_endian:
+        data, stamp = data.astype(np.uint32), stamp.astype(np.int32)
+    if state is not None and state.time_base != time_base_ns:
+        state.time_base = int(time_base_ns)
+        state.slots[:] = (-1, 0)
+    slots = state.slots if state is not None else np.array([-1, 0], np.int64)
+    x, y, t, p, oob = kern._libcaer(data, stamp, int(time_base_ns), int(width), int(height), slots,
+                                    state is not None)
+    return PacketResult(x, y, t, p, n_out_of_range=oob, n_trailing_bytes=trailing)
 
 
 def decode_mono(payload, time_base_ns: int, width: int = 0, height: int = 0, big_endian: bool = False) -> PacketResult:
     """Decode a mono packet (uint64 per event, ns offsets from ``time_base``)."""
     words, trailing = _words(as_bytes_array(payload), 8, big_endian)
-    t = int(time_base_ns) + (words & 0xFFFFFFFF).astype(np.int64)
-    x = ((words >> 32) & 0xFFFF).astype(np.uint16)
-    y = ((words >> 48) & 0x7FFF).astype(np.uint16)
-    p = (words >> 63).astype(np.uint8)
-    return _crop(PacketResult(x, y, t, p, n_trailing_bytes=trailing), width, height)
+    x, y, t, p, oob = kern._mono(words, int(time_base_ns), int(width), int(height))
+    return PacketResult(x, y, t, p, n_out_of_range=oob, n_trailing_bytes=trailing)
 
 
 def decode_evt3(payload, width: int = 0, height: int = 0, big_endian: bool = False,
                 state: Evt3State | None = None) -> PacketResult:
     """Decode an evt3 packet; time is the camera clock in ns. Pass ``state`` between packets."""
     words, trailing = _words(as_bytes_array(payload), 2, big_endian)
-    if words.dtype.byteorder == ">":
-        words = words.astype(np.uint16)
     st = state if state is not None else Evt3State()
-    z16, z64, z8 = np.zeros(0, np.uint16), np.zeros(0, np.int64), np.zeros(0, np.uint8)
-    n, n_trig, _, _ = kern._evt3_decode(words, st.slots, width, height, True, z16, z16, z64, z8, z64, z8, z8)
-    xs, ys, ts, ps = np.empty(n, np.uint16), np.empty(n, np.uint16), np.empty(n, np.int64), np.empty(n, np.uint8)
-    tt, te, ti = np.empty(n_trig, np.int64), np.empty(n_trig, np.uint8), np.empty(n_trig, np.uint8)
-    _, _, n_oob, n_unknown = kern._evt3_decode(words, st.slots, width, height, False, xs, ys, ts, ps, tt, te, ti)
-    ts *= 1000
-    tt *= 1000
-    return PacketResult(xs, ys, ts, ps, n_out_of_range=n_oob, n_unknown_words=n_unknown, n_trailing_bytes=trailing,
+    x, y, t, p, tt, te, ti, oob, unknown = kern._evt3(words, st.slots, int(width), int(height))
+    return PacketResult(x, y, t, p, n_out_of_range=oob, n_unknown_words=unknown, n_trailing_bytes=trailing,
                         trigger_t=tt, trigger_edge=te, trigger_id=ti)
 
 
