@@ -144,3 +144,19 @@ def test_prophesee_evt3_raw_against_reference_decode(realdata):
     assert int(b.t[0] // 1000) == int(ref["t"][0])
     lag_us = ref["t"] - b.t // 1000
     assert np.all(lag_us % 4096 == 0) and np.all(lag_us >= 0)
+
+
+def test_aedat4_agrees_with_dv_processing(realdata):
+    dv = pytest.importorskip("dv_processing", reason="dv-processing is not installed (pip install 'atsvo_ros[bench]')")
+    _, b = _read(realdata / "tonic_samples" / "sample.aedat4")
+    rec = dv.io.MonoCameraRecording(str(realdata / "tonic_samples" / "sample.aedat4"))
+    parts = []
+    while rec.isRunning():
+        store = rec.getNextEventBatch()
+        if store is not None:
+            parts.append(store.numpy())
+    ref = np.concatenate(parts)
+    np.testing.assert_array_equal(b.t, ref["timestamp"] * 1000)
+    np.testing.assert_array_equal(b.x, ref["x"])
+    np.testing.assert_array_equal(b.y, ref["y"])
+    np.testing.assert_array_equal(b.p, ref["polarity"])
