@@ -173,9 +173,11 @@ class Motion:
         # Pronk: ballistic hops, spring-like stance, vibration after each touchdown.
         z += w["pronk"] * self._pronk_height(t)
         tau_td = self._pronk_since_touchdown(t)
-        z += w["pronk"] * _vibration(tau_td, 0.004, 23.0, 0.05)
-        pitch += w["pronk"] * (_vibration(tau_td, np.radians(1.2), 17.0, 0.06) + np.radians(2.0) * np.sin(
-            2 * np.pi * GAITS["pronk"][1] * t + 0.3))
+        period = self.params["pronk_air_s"] + self.params["pronk_stance_s"]
+        for k in range(4):  # the latest touchdowns' vibrations (older ones have died out)
+            z += w["pronk"] * _vibration(tau_td + k * period, 0.004, 23.0, 0.05)
+            pitch += w["pronk"] * _vibration(tau_td + k * period, np.radians(1.2), 17.0, 0.06)
+        pitch += w["pronk"] * np.radians(2.0) * np.sin(2 * np.pi * GAITS["pronk"][1] * t + 0.3)
         if self.scenario == "backflip":
             dz, dpitch, dx = self._backflip(t)
             z += dz

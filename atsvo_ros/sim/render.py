@@ -167,12 +167,16 @@ def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_v
             cos_i = 0.05
         tpm = face_tpm[face]
         foot = best * dn * pix_angle[i] / np.sqrt(cos_i) * tpm
-        lev = np.log2(foot) if foot > 1.0 else 0.0
-        if lev > n_lv - 1:
-            lev = n_lv - 1.0
-        l0 = int(lev)
+        # Level l0 with footprint in [2^l0, 2^(l0+1)); blend weight linear in the footprint
+        # (continuous across levels, cheaper than log2).
+        l0 = 0
+        while foot >= 2.0 and l0 < n_lv - 1:
+            foot *= 0.5
+            l0 += 1
+        w1 = foot - 1.0 if foot > 1.0 else 0.0
+        if w1 > 1.0:
+            w1 = 1.0
         l1 = l0 + 1 if l0 + 1 < n_lv else l0
-        w1 = lev - l0
         tid = face_tex[face]
         u = (su + face_off[face, 0]) * tpm
         v = (sv + face_off[face, 1]) * tpm

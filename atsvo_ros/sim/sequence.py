@@ -201,7 +201,8 @@ class Simulation:
             for s, T in zip(chunk, self.T_world_base(chunk)):
                 yield GroundTruth(int(s), T)
 
-    def frames(self) -> Iterator[RgbdFrame]:
+    def frames(self, stats: dict | None = None) -> Iterator[RgbdFrame]:
+        """RGB-D frames at ``rate_hz`` (``stats['rgb_renders']`` counts the rendered sub-frames)."""
         spec, rig = self.spec, self.rig
         renderer = Renderer(self.scene, rig.rgb_camera)
         depth_renderer = None if rig.depth_camera == rig.rgb_camera else Renderer(self.scene, rig.depth_camera)
@@ -226,6 +227,8 @@ class Simulation:
                 subs.append(col)
                 if j == n_sub // 2:
                     depth_prev = depth
+            if stats is not None:
+                stats["rgb_renders"] = stats.get("rgb_renders", 0) + n_sub
             rgb = sensor.expose(subs, stamp)
             depth = depth_prev if depth_renderer is None else depth_renderer.render(poses[n_sub // 2])[1]
             yield RgbdFrame(stamp, rgb, depth_to_mm(depth, self.depth_model, self._rng_depth))
@@ -244,19 +247,27 @@ class Simulation:
         packet_ns = int(round(spec.event_packet_s * 1e9))
         max_dt = max(int(m.max_render_interval_s * 1e9), 1000)
         dt = 100_000
+        fractions = np.array([0.6, 0.8, 1.0, 1.25, 1.6])
         pending: list[EventBatch] = []
         w_start = t
         renders = 1
         while t < t_end:
-            dt = min(int(dt * 1.5), max_dt)
-            for _ in range(8):
-                t1 = min(t + dt, t_end)
-                t1 = -(-t1 // 1000) * 1000  # renders on the microsecond grid
-                T1 = self.T_world_event(t1)
-                moved = probe.max_motion_px(depth, T, T1)
-                if moved <= m.max_step_px or dt <= 1000:
+            # Several candidate render times in one pose evaluation: take the latest one that keeps
+            # the apparent motion below max_step_px; shrink and retry when none does.
+            for _ in range(20):
+                cands = np.minimum(t + np.maximum(np.round(dt * fractions), 1000).astype(np.int64), t_end)
+                cands = -(-cands // 1000) * 1000  # renders on the microsecond grid
+                poses = self.T_world_event(cands)
+                moved = probe.max_motion_px(depth, T, poses)
+                ok = np.flatnonzero((moved <= m.max_step_px) | (cands - t <= 1000))
+                if len(ok):
+                    i = int(ok[-1])
                     break
-                dt = max(int(dt * 0.95 * m.max_step_px / moved), 1000)
+                dt = max(int(dt * fractions[0] * 0.9 * m.max_step_px / moved[0]), 1000)
+            t1, T1 = int(cands[i]), poses[i]
+            step = t1 - t
+            dt = int(np.clip(step * 0.9 * m.max_step_px / max(moved[i], 1e-6), 0.5 * step, 2.0 * step))
+            dt = min(max(dt, 1000), max_dt)
             grey, depth = renderer.render(T1)
             renders += 1
             batch = sensor.step(grey, t1)
@@ -292,17 +303,20 @@ class _MotionProbe:
         self.uv = np.column_stack([uu, vv]).astype(np.float64)
         self.rays = rays
 
-    def max_motion_px(self, depth: np.ndarray, T_w_c0: np.ndarray, T_w_c1: np.ndarray) -> float:
+    def max_motion_px(self, depth: np.ndarray, T_w_c0: np.ndarray, T_w_c1: np.ndarray) -> np.ndarray | float:
+        """Max pixel motion from pose ``T_w_c0`` to ``T_w_c1`` (one pose, or a stack -> one value each)."""
         d = depth.ravel()
-        idx = np.append(self.index, int(np.argmin(d)))
-        uv0 = np.vstack([self.uv, [idx[-1] % self.camera.width, idx[-1] // self.camera.width]])
+        imin = int(np.argmin(d))
+        idx = np.append(self.index, imin)
+        uv0 = np.vstack([self.uv, [imin % self.camera.width, imin // self.camera.width]])
         p0 = self.rays[idx] * d[idx, None]
-        T = se3_inv(T_w_c1) @ T_w_c0
-        p1 = p0 @ T[:3, :3].T + T[:3, 3]
-        if np.any(p1[:, 2] < 0.02):
-            return float("inf")
-        uv1, _ = self.camera.project(p1)
-        return float(np.max(np.abs(uv1 - uv0).max(axis=1)))
+        single = np.ndim(T_w_c1) == 2
+        T = se3_inv(np.asarray(T_w_c1).reshape(-1, 4, 4)) @ T_w_c0
+        p1 = np.einsum("kij,nj->kni", T[:, :3, :3], p0) + T[:, None, :3, 3]
+        uv1, _ = self.camera.project(p1.reshape(-1, 3))
+        err = np.abs(uv1.reshape(len(T), -1, 2) - uv0).max(axis=2).max(axis=1)
+        err[np.any(p1[:, :, 2] < 0.02, axis=1)] = np.inf
+        return float(err[0]) if single else err
 
 
 def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
@@ -310,7 +324,7 @@ def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
     """Generate a sequence: ground truth, RGB-D frames and event packets merged in time order.
 
     Event packets are keyed by their end (they are complete then); frames and poses by their stamp.
-    ``stats`` (optional dict) receives counters such as ``event_renders`` at the end.
+    ``stats`` (optional dict) receives counters ``event_renders`` and ``rgb_renders``.
     """
     sim = Simulation(spec, scene)
     packet_ns = int(round(spec.event_packet_s * 1e9))
@@ -325,7 +339,7 @@ def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
         return min(sim.t_start_ns + k * packet_ns, sim.t_end_ns + 1)
 
     streams = [keyed(sim.ground_truth(), 0, lambda g: g.stamp_ns),
-               keyed(sim.frames(), 1, lambda f: f.stamp_ns),
+               keyed(sim.frames(stats), 1, lambda f: f.stamp_ns),
                keyed(sim.events(stats), 2, event_key)]
     for _, _, item in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
         yield item
