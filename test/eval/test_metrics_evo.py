@@ -1,8 +1,6 @@
 """Cross-check of atsvo_ros.eval.metrics against the evo package on real TUM RGB-D trajectories."""
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
 
