@@ -160,3 +160,24 @@ def test_aedat4_agrees_with_dv_processing(realdata):
     np.testing.assert_array_equal(b.x, ref["x"])
     np.testing.assert_array_equal(b.y, ref["y"])
     np.testing.assert_array_equal(b.p, ref["polarity"])
+
+
+@pytest.mark.parametrize("ros_version", [1, 2])
+def test_registered_message_types_match_the_published_definitions(realdata, ros_version):
+    from rosbags.typesys import get_types_from_msg
+
+    from atsvo_ros.io.msgtypes import DEFINITIONS, typestore
+
+    store = typestore(ros_version)
+    checked = 0
+    for path in sorted((realdata / "cear_dvxlite_d455_calib" / "msgs").glob("*.msg")):
+        parts = path.name[: -len(".msg")].split(".")
+        if len(parts) == 2 and parts[1] != f"ros{ros_version}":
+            continue  # the other ROS version's definition
+        pkg, name = parts[0].split("__")
+        full = f"{pkg}/msg/{name}"
+        if full not in DEFINITIONS:
+            continue  # e.g. dv_ros_msgs/Trigger: not an event stream
+        assert store.fielddefs[full] == get_types_from_msg(path.read_text(), full)[full], full
+        checked += 1
+    assert checked == 7
