@@ -64,6 +64,15 @@ class EventSource:
         b = EventBatch.concatenate(batches)
         return EventBatch(b.x, b.y, b.t, b.p, self.width or b.width, self.height or b.height)
 
+    def raw_messages(self) -> Iterator[bytes]:
+        """Serialized messages of the event topic, in bag order (bags only; decode with :class:`EventDecoder`)."""
+        if self.kind not in ("bag1", "bag2"):
+            raise DecodeError(f"{self.path}: raw messages exist only in bags, this is a {self.kind} file")
+        with self._reader() as reader:
+            conns = [c for c in reader.connections if c.topic == self.topic]
+            for _conn, _t, raw in reader.messages(connections=conns):
+                yield raw
+
     # ----------------------------------------------------------------- internals
 
     def _count(self, b: EventBatch) -> None:
@@ -83,12 +92,10 @@ class EventSource:
         opts = {"strict": False, **self.decoder_options}
         dec = EventDecoder(self.msgtype, 1 if self.kind == "bag1" else 2, **opts)
         self.stats = dec.stats
-        with self._reader() as reader:
-            conns = [c for c in reader.connections if c.topic == self.topic]
-            for _conn, _t, raw in reader.messages(connections=conns):
-                b = dec.decode_raw(raw)
-                self.width, self.height, self.encoding = dec.stats.width, dec.stats.height, dec.stats.encoding
-                yield b
+        for raw in self.raw_messages():
+            b = dec.decode_raw(raw)
+            self.width, self.height, self.encoding = dec.stats.width, dec.stats.height, dec.stats.encoding
+            yield b
 
     def _iter_mvsec(self) -> Iterator[EventBatch]:
         from atsvo_ros.io.mvsec import MvsecReader

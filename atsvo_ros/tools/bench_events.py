@@ -126,9 +126,7 @@ def bench_real_decode(repeats: int) -> list[dict]:
         if not path.exists():
             continue
         src = open_events(path)
-        with src._reader() as reader:
-            conns = [c for c in reader.connections if c.topic == src.topic]
-            raws = [bytes(raw) for _, _, raw in reader.messages(connections=conns)]
+        raws = [bytes(raw) for raw in src.raw_messages()]
         n = sum(len(b) for b in open_events(path))
 
         def run(raws=raws, msgtype=src.msgtype) -> int:
