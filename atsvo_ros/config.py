@@ -147,6 +147,7 @@ class TrackerConfig:
     gradient_weight: float = _f(50.0, 0.0, 1000.0,
                                 doc="c of the pixel weight c^2/(c^2+|grad I|^2) (DSO); 0 = off")
     affine_brightness: bool = _f(True, doc="estimate a per-frame gain/offset (auto-exposure), as DSO does")
+    zero_mean_patches: bool = _f(True, doc="remove each patch's mean before comparing (vignetting, uneven light)")
     max_step_m: float = _f(0.5, 0.0, 100.0, lo_open=True,
                            doc="camera translation per frame beyond which the estimate counts as diverged")
     max_step_rot_deg: float = _f(30.0, 0.0, 180.0, lo_open=True,

@@ -15,14 +15,16 @@ OUTLIER = 2
 
 @njit(cache=True)
 def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, offset, huber, outlier_thr,
-               border, grad_c2, H, g, state):  # pragma: no cover - compiled
+               border, grad_c2, zero_mean, H, g, state):  # pragma: no cover - compiled
     """Gauss-Newton system of the patch residuals ``r = I(pi(T_cr T_rw p) + o) - (gain z + offset)``.
 
     Parameters are ``(xi, a, b)``: a left perturbation ``xi`` of ``T_rw`` (twist, translation first),
     the log-gain ``a`` (gain = e^a) and offset ``b``. Fills ``H`` (8x8), ``g`` (8) with the
     Huber-weighted ``J^T W J`` and ``J^T W r``, and ``state`` per point. Pixels are further weighted
     by ``c^2 / (c^2 + |grad I|^2)`` (``grad_c2`` = c^2, 0 = off), DSO's guard against edges whose
-    sub-pixel blur and occlusions make them unreliable. Returns
+    sub-pixel blur and occlusions make them unreliable. With ``zero_mean`` each patch's mean is
+    removed from the residuals (and Jacobians): brightness that varies slowly over the image
+    (vignetting, uneven light), which one global gain cannot model, then cancels. Returns
     ``(energy, n_inliers, n_visible, sum of inlier squared residuals)``. Outliers add a constant
     energy (the Huber cost of a patch at the threshold) and invisible points none, so the energy
     per visible point compares estimates fairly (as DSO's coarse tracker does).
@@ -94,6 +96,27 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
             r = iv - (gain * zs[k] + offset)
             res[k] = r
             sse += r * r
+        if zero_mean:
+            mr = 0.0
+            mgx = 0.0
+            mgy = 0.0
+            mz = 0.0
+            for k in range(npat):
+                mr += res[k]
+                mgx += gxs[k]
+                mgy += gys[k]
+                mz += zs[k]
+            mr /= npat
+            mgx /= npat
+            mgy /= npat
+            mz /= npat
+            sse = 0.0
+            for k in range(npat):
+                res[k] -= mr
+                gxs[k] -= mgx
+                gys[k] -= mgy
+                zs[k] -= mz
+                sse += res[k] * res[k]
         if not (sse <= max_sse):
             state[i] = OUTLIER
             energy += fixed
@@ -158,15 +181,16 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
             syy += wt * gy * gy
             sxa += wt * gx * ja
             sya += wt * gy * ja
-            sxb -= wt * gx
-            syb -= wt * gy
             saa += wt * ja * ja
-            sab -= wt * ja
-            sbb += wt
             sxr += wt * gx * r
             syr += wt * gy * r
             sar += wt * ja * r
-            sbr -= wt * r
+            if not zero_mean:  # the offset cancels in zero-mean residuals
+                sxb -= wt * gx
+                syb -= wt * gy
+                sab -= wt * ja
+                sbb += wt
+                sbr -= wt * r
         for c in range(6):
             M[0, c] = sxx * Jg[0, c] + sxy * Jg[1, c]
             M[1, c] = sxy * Jg[0, c] + syy * Jg[1, c]

@@ -43,6 +43,8 @@ class ResidualBlock:
         coarse_points: on level ``l > 0`` use an evenly strided subset of ``max(coarse_points, N / 4^l)``
             points (0 = all): coarse levels only need to bring the estimate into the basin of the
             next level, and their pixels are 4x fewer per level anyway.
+        zero_mean: compare patches after removing their means (only the gain of the brightness
+            model remains): robust to vignetting and uneven lighting.
     """
 
     name: str
@@ -56,6 +58,7 @@ class ResidualBlock:
     estimate_affine: bool = True
     border_px: float | None = None
     coarse_points: int = 0
+    zero_mean: bool = False
 
     def __post_init__(self) -> None:
         self.points_w = np.ascontiguousarray(self.points_w, dtype=np.float64).reshape(-1, 3)
@@ -104,7 +107,8 @@ class ResidualBlock:
         e, n_in, n_vis, sse = kernels._linearise(
             points, patches, self.pyramid[level], self.pattern, cam.fx, cam.fy, cam.cx, cam.cy,
             np.ascontiguousarray(T_rgb_w), self.T_cam_rgb, float(np.exp(affine[0])), float(affine[1]),
-            float(huber), float(outlier_thr), float(self.border_px), float(grad_c) ** 2, H, g, state)
+            float(huber), float(outlier_thr), float(self.border_px), float(grad_c) ** 2, bool(self.zero_mean),
+            H, g, state)
         return H * self.weight, g * self.weight, e * self.weight, int(n_in), int(n_vis), float(sse)
 
 
