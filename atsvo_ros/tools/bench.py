@@ -13,6 +13,8 @@ from atsvo_ros.tools._cli import run
 SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
     "events": ("atsvo_ros.tools.bench_events", "add_events_args", "main_events",
                "event decoding and time-surface speed vs rosbags and dv-processing"),
+    "tracking": ("atsvo_ros.tools.bench_tracking", "add_tracking_args", "main_tracking",
+                 "RGB-D tracking time per frame and accuracy on synthetic trot/flying sequences"),
 }
 
 
