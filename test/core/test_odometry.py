@@ -116,3 +116,28 @@ def test_events_are_buffered_and_bounded(config):
         odo.add_events(EventBatch(np.zeros(100), np.zeros(100), t, np.ones(100)))
     odo.add_events(EventBatch.empty())
     assert sum(len(b) for b in odo._events) <= 12 * 100
+
+
+def test_short_synthetic_trot_is_accurate():
+    """A few seconds of the simulator's trot (noise, blur, auto-exposure, vignetting, depth noise)."""
+    from atsvo_ros.eval.metrics import evaluate
+    from atsvo_ros.io.trajectory import Trajectory
+    from atsvo_ros.sim.sequence import SequenceSpec, make_simulation
+
+    sim = make_simulation(SequenceSpec(scenario="trot", duration_s=3.0, seed=4, width=320, height=240))
+    odo = Odometry(load_config("synthetic"), sim.rig.rgb_camera)
+    stamps, poses, statuses = [], [], []
+    for f in sim.frames():
+        r = odo.process_frame(RgbdFrame(f.stamp_ns, f.rgb, f.depth_m))
+        stamps.append(r.stamp_ns)
+        poses.append(r.T_odom_base)
+        statuses.append(r.status)
+    stamps = np.asarray(stamps, dtype=np.int64)
+    assert statuses[0] is TrackingStatus.INITIALISING
+    assert all(s is TrackingStatus.OK for s in statuses[1:])
+    gt = Trajectory(stamps, sim.T_world_base(stamps))
+    # The odom frame is the base at the first frame: no alignment needed to compare.
+    gt_odom = se3_inv(gt.T_w_b[0]) @ gt.T_w_b
+    assert np.max(np.linalg.norm(np.asarray(poses)[:, :3, 3] - gt_odom[:, :3, 3], axis=1)) < 0.03
+    m = evaluate(gt, Trajectory(stamps, np.asarray(poses))).metrics
+    assert m["ate_rmse_m"] < 0.02 and m["rpe_rot_deg_per_frame"] < 0.3 and not m["diverged"], m
