@@ -234,7 +234,11 @@ class Simulation:
             yield RgbdFrame(stamp, rgb, depth_to_mm(depth, self.depth_model, self._rng_depth))
 
     def events(self, stats: dict | None = None) -> Iterator[EventBatch]:
-        """Event packets of ``event_packet_s`` (empty packets are skipped), in time order."""
+        """Event packets of ``event_packet_s`` (empty packets are skipped), in time order.
+
+        ``stats['event_renders']`` counts the renders; with ``stats['log_render_stamps'] = True`` the
+        render stamps are listed in ``stats['event_render_stamps']``.
+        """
         spec, cam = self.spec, self.rig.event_camera
         m = spec.event_model
         renderer = Renderer(self.scene, cam)
@@ -251,12 +255,14 @@ class Simulation:
         pending: list[EventBatch] = []
         w_start = t
         renders = 1
+        render_log = stats.setdefault("event_render_stamps", [t]) if stats is not None and stats.get(
+            "log_render_stamps") else None
         while t < t_end:
             # Several candidate render times in one pose evaluation: take the latest one that keeps
             # the apparent motion below max_step_px; shrink and retry when none does.
             for _ in range(20):
-                cands = np.minimum(t + np.maximum(np.round(dt * fractions), 1000).astype(np.int64), t_end)
-                cands = -(-cands // 1000) * 1000  # renders on the microsecond grid
+                steps = np.clip(np.round(dt * fractions), 1000, max_dt).astype(np.int64) // 1000 * 1000
+                cands = np.minimum(t + steps, t_end)  # renders on the microsecond grid
                 poses = self.T_world_event(cands)
                 moved = probe.max_motion_px(depth, T, poses)
                 ok = np.flatnonzero((moved <= m.max_step_px) | (cands - t <= 1000))
@@ -285,6 +291,8 @@ class Simulation:
                 w_start = w_end
             if not pending:
                 w_start = self.t_start_ns + (t - self.t_start_ns) // packet_ns * packet_ns
+            if render_log is not None:
+                render_log.append(t1)
         if stats is not None:
             stats["event_renders"] = renders
 

@@ -202,3 +202,37 @@ def test_invalid_specs_raise():
         SequenceSpec(layout="tum")
     with pytest.raises(SimulationError, match="exposure"):
         SequenceSpec(exposure_s=0.05)
+
+
+def test_event_renders_never_let_the_scene_move_more_than_half_a_pixel():
+    """Check the adaptive render rate independently: dense flow of every pixel between renders."""
+    spec = SequenceSpec(scenario="backflip", duration_s=2.2, seed=0, event_scale=0.2, texture_size=16)
+    from atsvo_ros.sim.render import Renderer
+    from atsvo_ros.sim.sequence import Simulation
+
+    sim = Simulation(spec)
+    stats = {"log_render_stamps": True}
+    for _ in sim.events(stats):
+        pass
+    stamps = np.array(stats["event_render_stamps"])
+    assert len(stamps) == stats["event_renders"] and np.all(np.diff(stamps) > 0)
+    assert stamps[-1] == sim.t_end_ns
+    assert np.diff(stamps).max() <= spec.event_model.max_render_interval_s * 1e9
+    cam = sim.rig.event_camera
+    r = Renderer(sim.scene, cam)
+    u, v = np.meshgrid(np.arange(cam.width), np.arange(cam.height))
+    uv = np.column_stack([u.ravel(), v.ravel()]).astype(float)
+    poses = sim.T_world_event(stamps)
+    worst = []
+    for k in range(0, len(stamps) - 1, 3):
+        _, depth = r.render(poses[k])
+        p0 = r.rays * depth.reshape(-1, 1)
+        T = se3_inv(poses[k + 1]) @ poses[k]
+        uv1, ok = cam.project(p0 @ T[:3, :3].T + T[:3, 3])
+        worst.append(np.abs(uv1 - uv).max(axis=1).max())
+    worst = np.array(worst)
+    assert np.percentile(worst, 99) <= spec.event_model.max_step_px * 1.1
+    assert worst.max() <= spec.event_model.max_step_px * 1.5
+    # ... and the rate really adapts: renders are dense during the flip, sparse when standing.
+    gaps = np.diff(stamps)
+    assert np.percentile(gaps, 95) > 10 * np.percentile(gaps, 5)
