@@ -126,8 +126,8 @@ def bench_real_decode(repeats: int) -> list[dict]:
         if not path.exists():
             continue
         src = open_events(path)
+        n = sum(len(b) for b in src)  # also fills in src.encoding
         raws = [bytes(raw) for raw in src.raw_messages()]
-        n = sum(len(b) for b in open_events(path))
 
         def run(raws=raws, msgtype=src.msgtype) -> int:
             dec = EventDecoder(msgtype, 2)

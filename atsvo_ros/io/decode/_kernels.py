@@ -320,6 +320,14 @@ def _dvs_fields(ex: np.ndarray, ey: np.ndarray, esec: np.ndarray, ensec: np.ndar
 @njit(cache=True)
 def _count_backwards(t: np.ndarray, last_t: int) -> int:
     """How many events are older than the newest one before them (``last_t`` included)."""
+    n = t.shape[0]
+    if n == 0:
+        return 0
+    ordered = t[0] >= last_t
+    for i in range(1, n):  # branch-free and vectorizable: the common, already ordered case
+        ordered &= t[i] >= t[i - 1]
+    if ordered:
+        return 0
     m = last_t
     bad = 0
     for i in range(t.shape[0]):
