@@ -27,6 +27,10 @@ from atsvo_ros.io.decode import _kernels as kern
 
 ENCODINGS = ("libcaer_cmp", "libcaer", "mono", "evt3")
 LIBCAER_ROLLOVER_US = 1 << 31
+_NO_I64 = np.zeros(0, np.int64)
+_NO_U8 = np.zeros(0, np.uint8)
+_NO_I64.flags.writeable = False
+_NO_U8.flags.writeable = False
 
 
 @dataclass
@@ -40,9 +44,9 @@ class PacketResult:
     n_out_of_range: int = 0
     n_unknown_words: int = 0
     n_trailing_bytes: int = 0
-    trigger_t: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    trigger_edge: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
-    trigger_id: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
+    trigger_t: np.ndarray = field(default_factory=lambda: _NO_I64)
+    trigger_edge: np.ndarray = field(default_factory=lambda: _NO_U8)
+    trigger_id: np.ndarray = field(default_factory=lambda: _NO_U8)
 
 
 @dataclass
