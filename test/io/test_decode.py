@@ -114,3 +114,19 @@ def test_evt3_aligned_to_header_clock():
     out = dec.decode_raw(raw)
     assert out.t_first_ns == 1_700_000_000_000_000_000
     np.testing.assert_array_equal(np.diff(out.t), np.diff(b.t))
+
+
+def test_packet_message_with_rclpy_style_payloads():
+    """rclpy hands uint8[] over as array('B') (or bytes / a list); all decode the same."""
+    import array
+    from types import SimpleNamespace
+
+    b = _batch(n=30)
+    tb, payload = encode_events(b, "libcaer_cmp")
+    stamp = SimpleNamespace(sec=1, nanosec=2)
+    for events in (array.array("B", payload.tobytes()), payload.tobytes(), payload.tolist()):
+        msg = SimpleNamespace(header=SimpleNamespace(stamp=stamp, frame_id="ev"), height=b.height, width=b.width,
+                              seq=3, time_base=tb, encoding="libcaer_cmp", is_bigendian=False, events=events)
+        out = decode_message(msg, "event_camera_msgs/EventPacket")
+        np.testing.assert_array_equal(out.t, b.t)
+        np.testing.assert_array_equal(out.x, b.x)

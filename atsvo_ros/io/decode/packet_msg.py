@@ -1,6 +1,7 @@
 """event_camera_msgs/EventPacket: the fields around the payload, parsed from the serialized bytes."""
 from __future__ import annotations
 
+import array
 import struct
 from dataclasses import dataclass
 
@@ -67,6 +68,11 @@ def packet_fields_from_message(msg) -> PacketFields:
     """Duck-typed EventPacket (rosbags or rclpy object) -> :class:`PacketFields`."""
     st = msg.header.stamp
     ev = msg.events
-    events = ev if isinstance(ev, np.ndarray) else np.frombuffer(bytes(ev), np.uint8)
+    if isinstance(ev, np.ndarray):
+        events = ev.view(np.uint8).reshape(-1)
+    elif isinstance(ev, (bytes, bytearray, memoryview, array.array)):  # rclpy gives array('B') or bytes
+        events = np.frombuffer(ev, np.uint8)
+    else:
+        events = np.frombuffer(bytes(ev), np.uint8)
     return PacketFields(st.sec * 1_000_000_000 + st.nanosec, msg.header.frame_id, int(msg.height), int(msg.width),
                         int(msg.seq), int(msg.time_base), str(msg.encoding), bool(msg.is_bigendian), events)
