@@ -23,8 +23,12 @@ We keep the neighbourhood statistic exactly as printed and map it to a time cons
 as described: ``tau = clip(a, tau_l, tau_u)`` (``tau_mode = "mean_age"``, the default): a pixel
 whose neighbours fired ``a`` seconds ago on average fades on that same time scale, so a fast edge
 (short inter-event gaps along its path) leaves a short trail and a slow one a long trail. The
-literal formula stays available as ``tau_mode = "eq2_printed"`` for comparison. A pixel with no
-active neighbour uses ``tau_u`` (nothing suggests fast motion there).
+literal formula stays available as ``tau_mode = "eq2_printed"`` for comparison. With fewer than n
+active neighbours the mean runs over those; a pixel with no active neighbour uses ``tau_u``
+(nothing suggests fast motion there).
+
+Cost: :meth:`AdaptiveTimeSurface.update` keeps, for every pixel, the n latest timestamps of its ring
+exactly (O(16 n) per event), so that rendering needs only O(n) per pixel.
 """
 from __future__ import annotations
 
