@@ -247,3 +247,37 @@ def _gradient_stack(img):  # pragma: no cover - compiled
             for x in range(w):
                 out[y, x, 2] = 0.5 * (img[y + 1, x] - img[y - 1, x])
     return out
+
+
+@njit(cache=True)
+def _lm_step(H, g, lam, T):  # pragma: no cover - compiled
+    """Damped Gauss-Newton step ``(H + lam diag H) delta = -g`` and ``exp(delta[:6]) @ T``.
+
+    Returns ``(delta, T_new)``; ``delta`` is NaN when the system cannot be solved.
+    """
+    n = H.shape[0]
+    A = H.copy()
+    for i in range(n):
+        A[i, i] += lam * H[i, i] + 1e-9
+    delta = np.linalg.solve(A, -g)
+    rho = delta[:3]
+    wx, wy, wz = delta[3], delta[4], delta[5]
+    th2 = wx * wx + wy * wy + wz * wz
+    if th2 < 1e-12:
+        a = 1.0 - th2 / 6.0
+        b = 0.5 - th2 / 24.0
+        c = 1.0 / 6.0 - th2 / 120.0
+    else:
+        th = np.sqrt(th2)
+        a = np.sin(th) / th
+        b = (1.0 - np.cos(th)) / th2
+        c = (th - np.sin(th)) / (th2 * th)
+    W = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
+    W2 = W @ W
+    E = np.eye(4)
+    V = np.eye(3) + b * W + c * W2
+    for i in range(3):
+        for j in range(3):
+            E[i, j] += a * W[i, j] + b * W2[i, j]
+        E[i, 3] = V[i, 0] * rho[0] + V[i, 1] * rho[1] + V[i, 2] * rho[2]
+    return delta, E @ T

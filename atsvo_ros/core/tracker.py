@@ -176,13 +176,13 @@ class Tracker:
             H[i, i] += 1e-3 * max(1, n_in)
         return H, g, energy, n_in, n_vis, n_res, sse, n_aff
 
-    def _optimise_level(self, blocks, level, T, affine):
+    def _optimise_level(self, blocks, level, T, affine, first=None):
         """LM at one level. The outlier threshold is relaxed (x2, up to x4) while most visible points
         are outliers (a poor initial guess); convergence is an update below ``convergence_eps``
         scaled by the level's pixel size."""
         cfg = self.config
         thr = cfg.outlier_threshold
-        sysm = self._system(blocks, level, T, affine, thr)
+        sysm = first if first is not None else self._system(blocks, level, T, affine, thr)
         for _ in range(2):
             if sysm[4] == 0 or sysm[3] >= 0.5 * sysm[4]:
                 break
@@ -192,20 +192,19 @@ class Tracker:
         eps = cfg.convergence_eps * (2.0 ** level)
         lam = 1e-4
         iters = 0
+        rejected = 0
         converged = False
         fresh = True  # the blocks' point states belong to the current estimate
         for _ in range(cfg.max_iterations):
             iters += 1
             if n_in < 6:
                 break
-            A = H + lam * np.diag(np.diag(H)) + 1e-9 * np.eye(len(g))
             try:
-                delta = -np.linalg.solve(A, g)
-            except np.linalg.LinAlgError:
+                delta, T_new = kernels._lm_step(H, g, lam, T)
+            except Exception:  # singular system (numba raises a plain exception)
                 break
             if not np.all(np.isfinite(delta)):
                 break
-            T_new = _exp(delta[:6]) @ T
             aff_new = dict(affine)
             for j, blk in enumerate(aff_blocks):
                 a, b = affine[blk.name]
@@ -216,15 +215,18 @@ class Tracker:
                 gain = 1.0 - (En / nv) / max(E / max(n_vis, 1), 1e-12)
                 T, affine, H, g, E, n_in, n_vis, n_res, sse = T_new, aff_new, Hn, gn, En, ni, nv, nr, sn
                 fresh = True
+                rejected = 0
                 lam = max(lam * 0.25, 1e-7)
-                if small or gain < 1e-4:
+                if small or gain < 1e-3:  # the update or the energy (per visible point) stalls
                     converged = True
                     break
             else:
                 fresh = False
+                rejected += 1
                 lam *= 8.0
-                if lam > 1e3 or small:
-                    converged = small
+                # Near the minimum, noise and points crossing the border make tiny steps fail: stop.
+                if small or rejected >= 3:
+                    converged = small or rejected >= 3 and iters > 3
                     break
         return T, affine, H, g, E, n_in, n_vis, n_res, sse, iters, converged, fresh, thr
 
@@ -245,18 +247,20 @@ class Tracker:
         top = n_levels - 1
         # Evaluate every guess at the coarsest level; energy per visible point (outliers pay a
         # constant) picks the guess that explains the image best, which is then optimised.
-        best, best_e = None, np.inf
+        best, best_e, best_sys = None, np.inf, None
         for gi, T0 in enumerate(guesses):
             T0 = np.asarray(T0, dtype=np.float64)
             if not np.all(np.isfinite(T0)):
                 continue
-            e, n_vis = self._system(blocks, top, T0, affine, self.config.outlier_threshold)[2:5:2]
-            if n_vis > 0 and e / n_vis < best_e:
-                best, best_e = gi, e / n_vis
+            sysm = self._system(blocks, top, T0, affine, self.config.outlier_threshold)
+            if sysm[4] > 0 and sysm[2] / sysm[4] < best_e:
+                best, best_e, best_sys = gi, sysm[2] / sysm[4], sysm
         if best is None:
             raise TrackingError("no initial guess sees any map point (or every guess contains NaN)")
         gi = best
-        out = self._optimise_level(blocks, top, np.asarray(guesses[gi], dtype=np.float64), dict(affine))
+        if len(guesses) > 1 and gi != len(guesses) - 1:
+            best_sys = None  # the blocks' point states belong to the last guess evaluated
+        out = self._optimise_level(blocks, top, np.asarray(guesses[gi], dtype=np.float64), dict(affine), best_sys)
         total_iters = out[9]
         fresh = False
         for level in range(top - 1, -1, -1):
@@ -286,23 +290,6 @@ class Tracker:
         if not np.all(np.isfinite(cov)):
             cov = np.eye(6) * 1e6
         return 0.5 * (cov + cov.T)
-
-
-def _exp(xi: np.ndarray) -> np.ndarray:
-    """SE(3) exponential of a small twist (translation first); scalar maths, no broadcasting overhead."""
-    rho, w = xi[:3], xi[3:]
-    th2 = float(w @ w)
-    W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    W2 = W @ W
-    if th2 < 1e-12:
-        a, b, c = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0, 1.0 / 6.0 - th2 / 120.0
-    else:
-        th = np.sqrt(th2)
-        a, b, c = np.sin(th) / th, (1.0 - np.cos(th)) / th2, (th - np.sin(th)) / (th2 * th)
-    T = np.eye(4)
-    T[:3, :3] += a * W + b * W2
-    T[:3, 3] = (np.eye(3) + b * W + c * W2) @ rho
-    return T
 
 
 def image_pyramid_with_gradients(pyramid: list[np.ndarray]) -> list[np.ndarray]:
