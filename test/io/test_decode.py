@@ -130,3 +130,15 @@ def test_packet_message_with_rclpy_style_payloads():
         out = decode_message(msg, "event_camera_msgs/EventPacket")
         np.testing.assert_array_equal(out.t, b.t)
         np.testing.assert_array_equal(out.x, b.x)
+
+
+@pytest.mark.parametrize("encoding,word", [("libcaer_cmp", "u2"), ("evt3", "u2"), ("mono", "u8"), ("libcaer", "u4")])
+def test_big_endian_payloads(encoding, word):
+    b = _batch(n=25, t0=0 if encoding == "evt3" else 10**15)
+    tb, payload = encode_events(b, encoding)
+    swapped = payload.view(f"<{word}").byteswap().view(np.uint8)  # libcaer: both 32-bit fields swap alike
+    r = decode_packet(encoding, swapped, tb, b.width, b.height, big_endian=True)
+    np.testing.assert_array_equal(r.t, b.t)
+    np.testing.assert_array_equal(r.x, b.x)
+    np.testing.assert_array_equal(r.y, b.y)
+    np.testing.assert_array_equal(r.p, b.p)
