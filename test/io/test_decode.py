@@ -142,3 +142,16 @@ def test_big_endian_payloads(encoding, word):
     np.testing.assert_array_equal(r.x, b.x)
     np.testing.assert_array_equal(r.y, b.y)
     np.testing.assert_array_equal(r.p, b.p)
+
+
+@pytest.mark.parametrize("typ", [DVS, PACKET])
+def test_big_endian_cdr_messages(typ):
+    store = typestore(2)
+    b = _batch(n=9)
+    raw = serialize_dvs_event_array(b) if typ == DVS else serialize_event_packet(b, "mono")
+    msg = store.deserialize_cdr(raw, typ)
+    big = bytes(store.serialize_cdr(msg, typ, little_endian=False))
+    assert big[1] == 0  # CDR_BE
+    out = decode_raw(big, typ, 2)
+    np.testing.assert_array_equal(out.t, b.t)
+    np.testing.assert_array_equal(out.x, b.x)
