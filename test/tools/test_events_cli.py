@@ -120,3 +120,16 @@ def test_render_picks_slow_and_fast_moments(tmp_path, capsys):
     t0, counts, _ = event_rate_bins(path, 20_000_000)
     slow_m, fast_m = pick_moments(t0, counts, 20_000_000)
     assert slow_m.t_ns <= T0 + 300_000_000 < fast_m.t_ns
+
+
+def test_bench_front_end_and_decode_part_run():
+    """Smoke test of ``atsvo-bench events`` (no timing asserted: benchmarks are not tests)."""
+    from atsvo_ros.tools.bench import SUBCOMMANDS, build_parser
+    from atsvo_ros.tools.bench_events import bench_decode
+
+    assert "events" in SUBCOMMANDS
+    args = build_parser().parse_args(["events", "--events", "1000", "--repeats", "1"])
+    assert args.events == 1000 and args._target[1] == "main_events"
+    rows = bench_decode(3000, 1000, 1)
+    assert {r["encoding"] for r in rows} >= {"libcaer_cmp", "libcaer", "mono", "evt3"}
+    assert all(r["ours_eps"] > 0 and r["rosbags_eps"] > 0 for r in rows)
