@@ -254,7 +254,7 @@ class Renderer:
         Rz_inv[:, 0, 0], Rz_inv[:, 0, 1], Rz_inv[:, 1, 0], Rz_inv[:, 1, 1] = cs, sn, -sn, cs
         Rz_inv[:, 2, 2] = 1.0
         box_rot = np.ascontiguousarray(Rz_inv @ R)
-        box_lo = np.ascontiguousarray(np.einsum("bij,bj->bi", Rz_inv, -rel))
+        box_lo = np.ascontiguousarray((Rz_inv @ -rel[:, :, None])[:, :, 0])
         a = self._scene_args
         _cast(self.rays, self.pix_angle, R, t, *a[:5], vis, box_cam, box_rot, box_lo, *a[5:], grey, depth, col,
               rgb)

@@ -320,7 +320,7 @@ class _MotionProbe:
         p0 = self.rays[idx] * d[idx, None]
         single = np.ndim(T_w_c1) == 2
         T = se3_inv(np.asarray(T_w_c1).reshape(-1, 4, 4)) @ T_w_c0
-        p1 = np.einsum("kij,nj->kni", T[:, :3, :3], p0) + T[:, None, :3, 3]
+        p1 = np.matmul(p0[None], np.swapaxes(T[:, :3, :3], 1, 2)) + T[:, None, :3, 3]
         uv1, _ = self.camera.project(p1.reshape(-1, 3))
         err = np.abs(uv1.reshape(len(T), -1, 2) - uv0).max(axis=2).max(axis=1)
         err[np.any(p1[:, :, 2] < 0.02, axis=1)] = np.inf

@@ -98,7 +98,8 @@ class _Messages:
         P[[0, 2, 5, 6, 10]] = [cam.fx, cam.cx, cam.fy, cam.cy, 1.0]
         roi = self.T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
                                                          do_rectify=False)
-        fields = {"D" if self.ros1 else "d": np.asarray(cam.D, np.float64),
+        D = np.asarray(cam.D if cam.is_distorted else (0.0,) * 5, np.float64)  # as realsense2_camera does
+        fields = {"D" if self.ros1 else "d": D,
                   "K" if self.ros1 else "k": K, "R" if self.ros1 else "r": np.eye(3).reshape(-1),
                   "P" if self.ros1 else "p": P}
         return self.T["sensor_msgs/msg/CameraInfo"](header=self.header(stamp_ns, frame_id), height=cam.height,
@@ -153,8 +154,15 @@ class _BagSink:
 
     def add(self, topic: str, msgtype: str, store: Any, latching: bool = False) -> None:
         kw: dict[str, Any] = {"typestore": store}
-        if self.fmt == "ros1" and latching:
+        if latching and self.fmt == "ros1":
             kw["latching"] = 1
+        elif latching:  # /tf_static: transient local, so `ros2 bag play` latches it like tf2 expects
+            from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+            never = QosTime(sec=0x7FFFFFFF, nsec=0xFFFFFFFF)
+            kw["offered_qos_profiles"] = [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE,
+                                              QosDurability.TRANSIENT_LOCAL, never, never,
+                                              QosLiveliness.AUTOMATIC, never, False)]
         self.conns[topic] = self.writer.add_connection(topic, msgtype, **kw)
 
     def write(self, topic: str, t_ns: int, data: bytes) -> None:
