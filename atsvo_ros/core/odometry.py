@@ -113,6 +113,10 @@ class Odometry:
         self._healthy_reference = 9
         self._last_stamp: int | None = None
         self._initialised = False
+        #: Why the last frame was not tracked (None when it was): for logs and diagnostics.
+        self.last_loss_reason: str | None = None
+        #: Keyframes inserted since construction (re-initialisations included).
+        self.n_keyframes = 0
 
     # ------------------------------------------------------------------ inputs
     def add_events(self, batch: EventBatch) -> None:
@@ -173,9 +177,9 @@ class Odometry:
             return self._result(stamp, T_c_w, None, status, t_track, len(self.map), 0, n_new > 0)
 
         result = self._track(pyr, predicted)
-        good = result is not None and self._is_good(result)
+        self.last_loss_reason = self._loss_reason(result)
         t_track = time.perf_counter() - t0
-        if not good:
+        if self.last_loss_reason is not None:
             # Tracking lost: rebuild the map from this frame at the motion-model pose.
             T_c_w = predicted
             n_new = self._insert_keyframe(stamp, T_c_w, pyr, depth, tracked_uv=np.zeros((0, 2)), reset=True)
@@ -238,18 +242,22 @@ class Odometry:
         except TrackingError:
             return None
 
-    def _is_good(self, res: TrackResult) -> bool:
+    def _loss_reason(self, res: TrackResult | None) -> str | None:
+        """Why a tracking result cannot be trusted (None = good)."""
         cfg = self.config.tracker
-        if not res.ok:
-            return False
+        if res is None or not res.ok:
+            return "no estimate (NaN or no map point visible)"
         if res.n_inliers < max(cfg.min_inliers, cfg.min_inlier_fraction * res.n_visible):
-            return False
-        if np.sqrt(np.linalg.eigvalsh(res.covariance[:3, :3]).max()) > cfg.max_position_std_m:
-            return False
+            return f"{res.n_inliers} inliers of {res.n_visible} visible map points"
+        std = float(np.sqrt(np.linalg.eigvalsh(res.covariance[:3, :3]).max()))
+        if std > cfg.max_position_std_m:
+            return f"degenerate geometry (position std {std:.3f} m)"
         if abs(res.affine["rgb"][0]) > np.log(cfg.max_gain_ratio):
-            return False
+            return f"implausible brightness gain {np.exp(res.affine['rgb'][0]):.2f}"
         rot, trans = relative_motion(se3_inv(self._history[-1][1]), se3_inv(res.T_rgb_w))
-        return trans <= cfg.max_step_m and np.degrees(rot) <= cfg.max_step_rot_deg
+        if trans > cfg.max_step_m or np.degrees(rot) > cfg.max_step_rot_deg:
+            return f"jump of {trans:.3f} m / {np.degrees(rot):.1f} deg in one frame"
+        return None
 
     def _project(self, points_w: np.ndarray, T_c_w: np.ndarray) -> np.ndarray:
         p = points_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
@@ -282,6 +290,7 @@ class Odometry:
         if reset:
             self._affine = (0.0, 0.0)
         self.map.add_keyframe(stamp, se3_inv(T_c_w), self._affine, p_c, patches)
+        self.n_keyframes += 1
         all_uv = np.concatenate([np.asarray(tracked_uv, dtype=np.float64).reshape(-1, 2), uv.astype(np.float64)])
         ref = assess_health(all_uv, self.camera.width, self.camera.height, 1, self.config.mapping)
         self._n_reference = max(1, ref.n_tracked)

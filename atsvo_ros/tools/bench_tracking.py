@@ -70,8 +70,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
         "diverged": m["diverged"], "track_ms_median": float(np.median(t)) if len(t) else None,
         "track_ms_p90": float(np.percentile(t, 90)) if len(t) else None,
         "frame_cpu_ms_median": float(np.median(cpu_times) * 1e3) if cpu_times else None,
-        "wall_s": wall, "statuses": dict(statuses), "keyframes": int(odo.map.last_keyframe.kf_id + 1)
-        if odo.map.last_keyframe else 0,
+        "wall_s": wall, "statuses": dict(statuses), "keyframes": odo.n_keyframes,
     }
 
 
