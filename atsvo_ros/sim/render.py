@@ -15,6 +15,8 @@ from numba import njit
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.sim.scene import Scene
 
+_TILE = 8
+
 
 @njit(cache=True, fastmath=True)
 def _sample(tex_data, offset, size, u, v):
@@ -48,11 +50,11 @@ def _room_exit(o, d_lo, d_hi, room_lo, room_hi):
 
 
 @njit(cache=True, fastmath=True)
-def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_vis, box_cam, box_rot, box_lo, face_tex,
+def _cast(rays, pix_angle, pix_tile, R, t, room_min, room_max, box_c, box_h, box_cs, tile_boxes, tile_count,
+          box_cam, box_rot, box_lo, face_tex,
           face_tpm, face_off, face_tint, tex_data, tex_off, tex_size, light, ambient, light_ref2, out_grey,
           out_depth, out_rgb, want_rgb):
     n_pix = rays.shape[0]
-    n_vis = box_vis.shape[0]
     n_lv = tex_off.shape[1]
     ox, oy, oz = t[0], t[1], t[2]
     for i in range(n_pix):
@@ -75,8 +77,9 @@ def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_v
         rr = cx * cx + cy * cy + cz * cz
         inv_rr = 1.0 / rr
         inv_r = np.sqrt(inv_rr)
-        for j in range(n_vis):
-            b = box_vis[j]
+        tile = pix_tile[i]
+        for j in range(tile_count[tile]):
+            b = tile_boxes[tile, j]
             proj = (box_cam[b, 0] * cx + box_cam[b, 1] * cy + box_cam[b, 2] * cz) * inv_rr
             qx = box_cam[b, 0] - proj * cx
             qy = box_cam[b, 1] - proj * cy
@@ -204,6 +207,26 @@ def _cast(rays, pix_angle, R, t, room_min, room_max, box_c, box_h, box_cs, box_v
             out_rgb[i, 2] = g * face_tint[face, 2]
 
 
+@njit(cache=True, fastmath=True)
+def _cull_tiles(tile_axis, tile_cone, vis, box_cam, tile_boxes, tile_count):
+    """Per pixel tile, the boxes whose bounding sphere meets the tile's cone of rays."""
+    for k in range(tile_axis.shape[0]):
+        n = 0
+        for j in range(vis.shape[0]):
+            b = vis[j]
+            cx, cy, cz, rad = box_cam[b, 0], box_cam[b, 1], box_cam[b, 2], box_cam[b, 3]
+            dist = np.sqrt(cx * cx + cy * cy + cz * cz)
+            hit = dist <= rad
+            if not hit:
+                cos_a = (cx * tile_axis[k, 0] + cy * tile_axis[k, 1] + cz * tile_axis[k, 2]) / dist
+                ang = np.arccos(min(max(cos_a, -1.0), 1.0))
+                hit = ang <= tile_cone[k] + np.arcsin(rad / dist)
+            if hit:
+                tile_boxes[k, n] = b
+                n += 1
+        tile_count[k] = n
+
+
 class Renderer:
     """Renders one camera in one scene; the per-pixel rays are computed once here.
 
@@ -226,6 +249,21 @@ class Renderer:
         self._light_ref2 = float((s.room_max[2] - s.room_min[2] - 0.5) ** 2)
         # Half-angle of the cone holding every ray (for culling boxes outside the view).
         self._cone_half_angle = float(np.max(np.arctan(np.hypot(xy[:, 0], xy[:, 1])))) + 0.02
+        # 8x8 pixel tiles: unit axis and half-angle of each tile's cone of rays (box culling per tile).
+        tv, tu = np.divmod(np.arange(camera.width * camera.height), camera.width)
+        tiles_x = (camera.width + _TILE - 1) // _TILE
+        self.pix_tile = np.ascontiguousarray((tv // _TILE) * tiles_x + tu // _TILE, dtype=np.int64)
+        n_tiles = int(self.pix_tile.max()) + 1
+        unit = self.rays / np.linalg.norm(self.rays, axis=1, keepdims=True)
+        axis = np.zeros((n_tiles, 3))
+        np.add.at(axis, self.pix_tile, unit)
+        axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+        cone = np.zeros(n_tiles)
+        np.maximum.at(cone, self.pix_tile, np.arccos(np.clip(np.sum(unit * axis[self.pix_tile], axis=1), -1, 1)))
+        self._tile_axis = np.ascontiguousarray(axis)
+        self._tile_cone = cone + 0.01
+        self._tile_boxes = np.zeros((n_tiles, max(scene.n_boxes, 1)), np.int64)
+        self._tile_count = np.zeros(n_tiles, np.int64)
         tex16 = np.round(np.clip(s.atlas.data, 0.0, 1.0) * 65535.0).astype(np.uint16)
         self._scene_args = (s.room_min, s.room_max, s.box_center, s.box_half, np.ascontiguousarray(s.box_cos_sin),
                             s.face_tex, s.face_texel_per_m, s.face_offset_m, s.face_tint, tex16,
@@ -255,9 +293,10 @@ class Renderer:
         Rz_inv[:, 2, 2] = 1.0
         box_rot = np.ascontiguousarray(Rz_inv @ R)
         box_lo = np.ascontiguousarray((Rz_inv @ -rel[:, :, None])[:, :, 0])
+        _cull_tiles(self._tile_axis, self._tile_cone, vis, box_cam, self._tile_boxes, self._tile_count)
         a = self._scene_args
-        _cast(self.rays, self.pix_angle, R, t, *a[:5], vis, box_cam, box_rot, box_lo, *a[5:], grey, depth, col,
-              rgb)
+        _cast(self.rays, self.pix_angle, self.pix_tile, R, t, *a[:5], self._tile_boxes, self._tile_count, box_cam,
+              box_rot, box_lo, *a[5:], grey, depth, col, rgb)
         shape = (cam.height, cam.width)
         if rgb:
             return grey.reshape(shape), depth.reshape(shape), col.reshape(shape + (3,))
