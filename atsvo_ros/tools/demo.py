@@ -124,6 +124,8 @@ def _main(args: argparse.Namespace) -> int:
                 progress=False if args.no_progress else None, sim_args=sim_args)
     print(f"\n{args.scenario}, {args.duration:g} s, seed {args.seed} (synthetic, ground truth known)")
     print(format_table(rows))
+    for note in sorted({n for r in rows for n in r["notes"] if n.startswith("RGB-D only")}):
+        print(f"note: {note}")
     print(f"\ntrajectories, metrics.json and plots in {out}/<mode>/")
     return 0
 
