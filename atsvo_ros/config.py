@@ -147,7 +147,8 @@ class TrackerConfig:
     min_inliers: int = _f(30, 6, 100000, doc="fewer inlier map points than this and the frame is lost")
     gradient_weight: float = _f(50.0, 0.0, 1000.0,
                                 doc="c of the pixel weight c^2/(c^2+|grad I|^2) (DSO); 0 = off")
-    affine_brightness: bool = _f(True, doc="estimate a per-frame gain/offset (auto-exposure), as DSO does")
+    affine_brightness: bool = _f(True, doc="model a per-frame brightness gain (auto-exposure); with zero-mean "
+                                 "patches it is measured from patch means, otherwise gain/offset are fitted (DSO)")
     zero_mean_patches: bool = _f(True, doc="remove each patch's mean before comparing (vignetting, uneven light)")
     max_step_m: float = _f(0.5, 0.0, 100.0, lo_open=True,
                            doc="camera translation per frame beyond which the estimate counts as diverged")
@@ -155,8 +156,8 @@ class TrackerConfig:
                                  doc="camera rotation per frame beyond which the estimate counts as diverged")
     max_position_std_m: float = _f(0.05, 0.0, 100.0, lo_open=True,
                                    doc="pose translation std above which the frame is lost (degenerate geometry)")
-    max_gain_ratio: float = _f(4.0, 1.0, 100.0, lo_open=True,
-                               doc="brightness gain beyond [1/x, x] of the map's counts as lost (blank frames)")
+    max_gain_ratio: float = _f(2.0, 1.0, 100.0, lo_open=True,
+                               doc="brightness gain change between frames beyond [1/x, x] counts as lost")
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.geometry import hat, project_to_so3, relative_motion, se3_exp, se3_inv, se3_log
 from atsvo_ros.core.keyframes import assess_health
 from atsvo_ros.core.map import PointMap, extract_patches, valid_depth_mask
-from atsvo_ros.core.photometric import RGB_PATTERN
+from atsvo_ros.core.photometric import RGB_PATTERN, sample_patches
 from atsvo_ros.core.pyramid import build_pyramid, pyramid_cameras
 from atsvo_ros.core.selection.rgb import select_rgb_pixels
 from atsvo_ros.core.tracker import ResidualBlock, Tracker, TrackResult, image_pyramid_with_gradients
@@ -180,21 +180,18 @@ class Odometry:
         self.last_loss_reason = self._loss_reason(result)
         t_track = time.perf_counter() - t0
         if self.last_loss_reason is not None:
-            # Tracking lost: rebuild the map from this frame at the motion-model pose.
-            T_c_w = predicted
-            n_new = self._insert_keyframe(stamp, T_c_w, pyr, depth, tracked_uv=np.zeros((0, 2)), reset=True)
-            status = TrackingStatus.REINITIALISED if n_new > 0 else TrackingStatus.LOST
-            self._initialised = n_new > 0
-            self._push(stamp, T_c_w)
-            return self._result(stamp, T_c_w, None, status, t_track, len(self.map),
-                                0 if result is None else result.n_inliers, n_new > 0)
+            return self._lost(stamp, predicted, pyr, depth, t_track, result)
 
         T_c_w = result.T_rgb_w
         T_c_w[:3, :3] = project_to_so3(T_c_w[:3, :3])
-        self._affine = result.affine["rgb"]
         states = result.states["rgb"]
-        self.map.update_observations(states)
         inl = states == 1
+        affine = self._new_affine(result, pyr, T_c_w, inl)
+        if abs(affine[0] - self._affine[0]) > np.log(self.config.tracker.max_gain_ratio):
+            self.last_loss_reason = f"brightness gain jumped by x{np.exp(affine[0] - self._affine[0]):.2f}"
+            return self._lost(stamp, predicted, pyr, depth, t_track, result)
+        self._affine = affine
+        self.map.update_observations(states)
         uv_in = self._project(self.map.points_w[inl], T_c_w)
         health = assess_health(uv_in, self.camera.width, self.camera.height, self._n_reference,
                                self.config.mapping, self._healthy_reference)
@@ -208,6 +205,45 @@ class Odometry:
         self._push(stamp, T_c_w)
         return self._result(stamp, T_c_w, result.covariance, TrackingStatus.OK, t_track, len(self.map),
                             result.n_inliers, kf)
+
+    def _lost(self, stamp: int, predicted: np.ndarray, pyr: list[np.ndarray], depth: np.ndarray,
+              t_track: float, result: TrackResult | None) -> OdometryResult:
+        """Tracking lost: rebuild the map from this frame at the motion-model pose (no jump, no NaN)."""
+        n_new = self._insert_keyframe(stamp, predicted, pyr, depth, tracked_uv=np.zeros((0, 2)), reset=True)
+        status = TrackingStatus.REINITIALISED if n_new > 0 else TrackingStatus.LOST
+        self._initialised = n_new > 0
+        self._push(stamp, predicted)
+        return self._result(stamp, predicted, None, status, t_track, len(self.map),
+                            0 if result is None else result.n_inliers, n_new > 0)
+
+    def _new_affine(self, result: TrackResult, pyr: list[np.ndarray], T_c_w: np.ndarray,
+                    inliers: np.ndarray) -> tuple[float, float]:
+        """Brightness parameters of this frame relative to the map's reference scale.
+
+        With zero-mean patches the gain fitted by the alignment is a contrast ratio, which blur and
+        interpolation shrink; propagated into keyframes it would drift. So the gain kept for the
+        map (and the next frame) is measured after the alignment as the median ratio of the inlier
+        patches' mean intensities (current / stored) on pyramid level 1, which blur does not change.
+        """
+        cfg = self.config.tracker
+        if not cfg.affine_brightness:
+            return (0.0, 0.0)
+        if not cfg.zero_mean_patches:
+            return result.affine["rgb"]
+        lvl = min(1, self.n_levels - 1)
+        idx = np.flatnonzero(inliers)
+        if len(idx) < 20:
+            return self._affine
+        cam = self.cameras[lvl]
+        p = self.map.points_w[idx] @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+        uv, _ = cam.project(p)
+        cur, ok = sample_patches(pyr[lvl][..., 0], uv, RGB_PATTERN)
+        ref = self.map.patches[lvl][idx].mean(axis=1)
+        ok &= ref > 5.0
+        if ok.sum() < 20:
+            return self._affine
+        gain = float(np.median(cur[ok].mean(axis=1) / ref[ok]))
+        return (float(np.log(max(gain, 1e-3))), 0.0)
 
     # ------------------------------------------------------------------ tracking
     def _predict(self, stamp: int) -> np.ndarray:
@@ -252,8 +288,6 @@ class Odometry:
         std = float(np.sqrt(np.linalg.eigvalsh(res.covariance[:3, :3]).max()))
         if std > cfg.max_position_std_m:
             return f"degenerate geometry (position std {std:.3f} m)"
-        if abs(res.affine["rgb"][0]) > np.log(cfg.max_gain_ratio):
-            return f"implausible brightness gain {np.exp(res.affine['rgb'][0]):.2f}"
         rot, trans = relative_motion(se3_inv(self._history[-1][1]), se3_inv(res.T_rgb_w))
         if trans > cfg.max_step_m or np.degrees(rot) > cfg.max_step_rot_deg:
             return f"jump of {trans:.3f} m / {np.degrees(rot):.1f} deg in one frame"
