@@ -46,11 +46,19 @@ class EventModel:
 
 
 @njit(cache=True)
-def _crossings(L0, L1, t0_ns, t1_ns, ref, last_t, cpos, cneg, refractory_ns, res_ns):
-    """Events of all pixels between two log-intensity images; updates ``ref``/``last_t`` in place."""
+def _log(irradiance, eps, out):
+    for i in range(irradiance.shape[0]):
+        out[i] = np.log(irradiance[i] + eps)
+
+
+@njit(cache=True)
+def _crossings(L0, irradiance, eps, L1, t0_ns, t1_ns, ref, last_t, cpos, cneg, refractory_ns, res_ns):
+    """Events of all pixels between two log-intensity images; fills ``L1`` = log(irradiance + eps) and
+    updates ``ref``/``last_t`` in place."""
     n = L0.shape[0]
     cap = 0
     for i in range(n):
+        L1[i] = np.log(irradiance[i] + eps)
         d = L1[i] - ref[i]
         c = cpos[i] if d > 0 else cneg[i]
         cap += int(abs(d) / c)
@@ -116,7 +124,9 @@ class EventSensor:
 
     def log_intensity(self, irradiance: np.ndarray) -> np.ndarray:
         """Natural log of irradiance plus the dark offset ``log_eps`` (float64, flattened)."""
-        return np.log(np.asarray(irradiance, np.float64).ravel() + self.model.log_eps)
+        out = np.empty(np.size(irradiance))
+        _log(np.ascontiguousarray(irradiance, np.float32).ravel(), np.float64(self.model.log_eps), out)
+        return out
 
     def reset(self, irradiance: np.ndarray, t_ns: int) -> None:
         """Start from a render: the references equal the current log intensity (no events)."""
@@ -131,11 +141,11 @@ class EventSensor:
         t0, t1 = self._t_ns, int(t_ns)
         if t1 <= t0:
             raise SimulationError(f"renders must move forward in time ({t0} -> {t1} ns)")
-        L1 = self.log_intensity(irradiance)
         m = self.model
-        idx, ts, pol = _crossings(self._L, L1, np.int64(t0), np.int64(t1), self.ref, self.last_t, self.c_pos,
-                                  self.c_neg, np.int64(round(m.refractory_s * 1e9)),
-                                  np.int64(m.timestamp_resolution_ns))
+        L1 = np.empty_like(self._L)
+        idx, ts, pol = _crossings(self._L, np.ascontiguousarray(irradiance, np.float32).ravel(), np.float64(m.log_eps),
+                                  L1, np.int64(t0), np.int64(t1), self.ref, self.last_t, self.c_pos, self.c_neg,
+                                  np.int64(round(m.refractory_s * 1e9)), np.int64(m.timestamp_resolution_ns))
         self._L, self._t_ns = L1, t1
         idx, ts, pol = self._add_noise(idx, ts, pol, t0, t1)
         order = np.argsort(ts, kind="stable")

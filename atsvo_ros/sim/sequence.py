@@ -217,19 +217,22 @@ class Simulation:
             if depth_prev is None:
                 depth_prev = renderer.render(self.T_world_rgb(stamp))[1]
             moved = probe.max_motion_px(depth_prev, self.T_world_rgb(stamp - half), self.T_world_rgb(stamp + half))
-            n_sub = int(np.clip(np.ceil(moved / spec.rgb_model.max_blur_step_px), 0, spec.rgb_model.max_subframes))
-            n_sub += 1 - n_sub % 2  # odd: the middle sub-frame lies at the stamp
+            # Sub-frames no more than max_blur_step_px apart (a single one when the blur is below that);
+            # an odd count puts the middle one at the stamp.
+            step_px = spec.rgb_model.max_blur_step_px
+            n_sub = 1 if moved <= step_px else min(int(np.ceil(moved / step_px)) + 1, spec.rgb_model.max_subframes)
+            n_sub += 1 - n_sub % 2
             times = stamp + (np.linspace(-half, half, n_sub) if n_sub > 1 else np.zeros(1)).round().astype(np.int64)
             poses = self.T_world_rgb(times)
-            subs = []
+            acc = None
             for j, T in enumerate(poses):
                 _, depth, col = renderer.render(T, rgb=True)
-                subs.append(col)
+                acc = col if acc is None else np.add(acc, col, out=acc)
                 if j == n_sub // 2:
                     depth_prev = depth
             if stats is not None:
                 stats["rgb_renders"] = stats.get("rgb_renders", 0) + n_sub
-            rgb = sensor.expose(subs, stamp)
+            rgb = sensor.expose([acc * np.float32(1.0 / n_sub)], stamp)
             depth = depth_prev if depth_renderer is None else depth_renderer.render(poses[n_sub // 2])[1]
             yield RgbdFrame(stamp, rgb, depth_to_mm(depth, self.depth_model, self._rng_depth))
 
