@@ -166,7 +166,9 @@ class MappingConfig:
 
     region_min_points: int = _f(20, 1, 100000, doc="tracked points that make one of the 3x3 regions healthy")
     min_healthy_regions: int = _f(7, 1, 9)
-    min_tracked_fraction: float = _f(0.6, 0.0, 1.0, doc="tracked/selected ratio below which a keyframe is added")
+    min_tracked_fraction: float = _f(0.75, 0.0, 1.0,
+                                     doc="tracked points / those right after the last keyframe below which a keyframe "
+                                         "is added (frame-to-map tracking degrades fast as coverage drops)")
     max_keyframes: int = _f(6, 1, 1000, doc="keyframes in the local map")
     max_points: int = _f(6000, 100, 10000000)
     depth_edge_ratio: float = _f(0.05, 0.0, 10.0, lo_open=True,

@@ -4,8 +4,8 @@ The image is cut into ``d x d`` blocks; each block gets an adaptive gradient thr
 gradient plus ``min_gradient``, smoothed over neighbouring blocks, like DSO), so that textured and
 flat parts of the image both contribute. Candidates above the threshold are then thinned to the
 strongest pixel per cell of an adaptive cell size that makes the count reach ``target_points``,
-and cells left empty get a second chance at half the threshold on a coarser grid, which spreads
-the points over the whole image.
+and cells left empty get a second chance at half the threshold (never below ``min_gradient``) on a
+coarser grid, which spreads the points over the whole image without picking pure sensor noise.
 """
 from __future__ import annotations
 
@@ -102,7 +102,8 @@ def select_rgb_pixels(grey: np.ndarray, config: RgbSelectionConfig, mask: np.nda
         taken = np.zeros((-(-h // c), -(-w // c)), dtype=bool)
         taken[ys // c, xs // c] = True
         occupied = np.repeat(np.repeat(taken, c, 0), c, 1)[:h, :w]
-        weak = np.where(allowed & (grad > 0.5 * thr) & ~occupied, grad, -1.0).astype(np.float32)
+        weak_thr = np.maximum(0.5 * thr, config.min_gradient)  # never below the absolute floor (noise)
+        weak = np.where(allowed & (grad > weak_thr) & ~occupied, grad, -1.0).astype(np.float32)
         x2, y2 = _best_per_cell(weak, c)
         keep = np.argsort(-grad[y2, x2], kind="stable")[: target - len(xs)]
         xs, ys = np.concatenate([xs, x2[keep]]), np.concatenate([ys, y2[keep]])
