@@ -253,7 +253,8 @@ def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event
     wall = time.perf_counter() - wall0
     write_tum(out / "groundtruth.tum", Trajectory(np.asarray(gt_stamps), np.asarray(gt_poses)),
               header=f"atsvo-sim {spec.scenario} seed {spec.seed}: T_world_{rig.config.topics.base_frame}")
-    summary = {**counts, "event_renders": int(stats.get("event_renders", 0)), "wall_s": round(wall, 2),
+    summary = {**counts, "event_renders": int(stats.get("event_renders", 0)),
+               "rgb_renders": int(stats.get("rgb_renders", 0)), "wall_s": round(wall, 2),
                "bag": str(bag_path)}
     _write_description(out / "sequence.yaml", spec, rig, topics, fmt, event_msg, encoding, summary)
     return summary

@@ -32,7 +32,8 @@ def _main(args: argparse.Namespace) -> int:
                              force=args.force, progress=not args.quiet)
     print(f"{args.scenario} {args.duration:g} s seed {args.seed}: {summary['frames']} RGB-D frames, "
           f"{summary['events']} events in {summary['event_packets']} packets "
-          f"({summary['event_renders']} event renders), {summary['poses']} poses; "
+          f"({summary['event_renders']} event renders, {summary['rgb_renders']} colour sub-frames), "
+          f"{summary['poses']} poses; "
           f"{summary['wall_s']:.1f} s wall -> {summary['bag']}", file=sys.stderr)
     return 0
 
