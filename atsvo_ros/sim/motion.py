@@ -297,11 +297,16 @@ def _schedule(scenario: str, duration_s: float, rng: np.random.Generator) -> Gai
 
 
 def make_motion(scenario: str, duration_s: float, seed: int,
-                free_xy: tuple[float, float, float, float] = (2.0, 6.0, 2.0, 4.0), t0_ns: int = 0) -> Motion:
+                free_xy: tuple[float, float, float, float] | None = None, t0_ns: int = 0) -> Motion:
     """The body trajectory of ``scenario`` (one of :data:`SCENARIOS`), reproducible from ``seed``.
 
-    ``free_xy`` is the floor rectangle the body stays inside (``Scene.free_xy``).
+    ``free_xy`` is the floor rectangle the body stays inside (``Scene.free_xy``); by default the one
+    of ``make_scene(seed)``, so that ``make_scene(s)`` and ``make_motion(..., s)`` fit together.
     """
+    if free_xy is None:
+        from atsvo_ros.sim.scene import scene_free_xy
+
+        free_xy = scene_free_xy(seed)
     if scenario not in SCENARIOS:
         raise SimulationError(f"unknown scenario {scenario!r} (choose one of {', '.join(SCENARIOS)})")
     if not duration_s > 0:

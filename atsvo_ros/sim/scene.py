@@ -103,6 +103,28 @@ def build_scene(room_min, room_max, boxes: list[tuple], textures: list[np.ndarra
                  float(clearance_m))
 
 
+_BOX_BAND_M = 1.3
+_CLEARANCE_M = 0.6
+
+
+def _scene_rng(seed: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), 0x5CE4E]))
+
+
+def _room_size(rng: np.random.Generator) -> np.ndarray:
+    return np.array([rng.uniform(7.0, 9.0), rng.uniform(5.5, 7.5), rng.uniform(2.6, 3.2)])
+
+
+def _free_xy(size: np.ndarray) -> tuple[float, float, float, float]:
+    margin = _BOX_BAND_M + _CLEARANCE_M
+    return (margin, float(size[0]) - margin, margin, float(size[1]) - margin)
+
+
+def scene_free_xy(seed: int) -> tuple[float, float, float, float]:
+    """``make_scene(seed).free_xy`` without building the scene (textures are the costly part)."""
+    return _free_xy(_room_size(_scene_rng(seed)))
+
+
 def make_scene(seed: int, texture_size: int = 512) -> Scene:
     """A random furnished room, reproducible from ``seed``.
 
@@ -110,10 +132,10 @@ def make_scene(seed: int, texture_size: int = 512) -> Scene:
     stacked and slightly rotated; the central free area keeps the robot >= 0.6 m from them so
     the cameras see structure at 0.5-6 m.
     """
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5CE4E]))
-    size = np.array([rng.uniform(7.0, 9.0), rng.uniform(5.5, 7.5), rng.uniform(2.6, 3.2)])
+    rng = _scene_rng(seed)
+    size = _room_size(rng)
     room_min, room_max = np.zeros(3), size
-    band = 1.3  # boxes live within this distance of the walls
+    band = _BOX_BAND_M  # boxes live within this distance of the walls
     boxes: list[tuple] = []
 
     def fits(c, h, yaw):
@@ -148,8 +170,7 @@ def make_scene(seed: int, texture_size: int = 512) -> Scene:
             if rng.random() < 0.3:  # a smaller box stacked on top
                 h2 = h * np.array([rng.uniform(0.4, 0.9), rng.uniform(0.4, 0.9), rng.uniform(0.4, 1.0)])
                 boxes.append((c + np.array([0.0, 0.0, h[2] + h2[2]]), h2, yaw + float(rng.uniform(-0.3, 0.3))))
-    margin = band + 0.6
-    free_xy = (margin, size[0] - margin, margin, size[1] - margin)
+    free_xy = _free_xy(size)
 
     styles_floor, styles_wall, styles_box = ("carpet", "wood", "concrete"), ("plaster", "poster", "concrete"), \
         ("cardboard", "poster", "wood")

@@ -98,3 +98,10 @@ def test_bad_requests_raise():
         make_motion("moonwalk", 1.0, 0, FREE)
     with pytest.raises(SimulationError, match="backflip needs"):
         make_motion("backflip", 1.0, 0, FREE)
+
+
+def test_default_free_area_is_the_seeded_scene_one():
+    from atsvo_ros.sim.scene import make_scene
+
+    for seed in (0, 3):
+        assert make_motion("trot", 1.0, seed).free_xy == make_scene(seed, 16).free_xy
