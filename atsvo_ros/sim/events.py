@@ -21,7 +21,19 @@ from atsvo_ros.errors import SimulationError
 
 @dataclass(frozen=True)
 class EventModel:
-    """Event-camera parameters (thresholds in natural-log units)."""
+    """Event-camera parameters (thresholds in natural-log units).
+
+    Attributes:
+        contrast_pos / contrast_neg: nominal ON / OFF thresholds C+ / C-.
+        contrast_sigma: per-pixel Gaussian mismatch of the thresholds (drawn once per sensor).
+        contrast_min: floor of a pixel's threshold after the mismatch.
+        refractory_s: dead time after an event; later crossings are postponed, not lost.
+        noise_rate_hz: background-activity events per pixel and second (Poisson, random polarity).
+        log_eps: dark offset in log(irradiance + log_eps): dark regions fire fewer events.
+        max_step_px: largest apparent scene motion between two renders (sets the render rate).
+        max_render_interval_s: render at least this often even when nothing moves.
+        timestamp_resolution_ns: the sensor clock (1 us for the DVXplorer).
+    """
 
     contrast_pos: float = 0.2
     contrast_neg: float = 0.2

@@ -19,7 +19,18 @@ from atsvo_ros.errors import SimulationError
 
 @dataclass(frozen=True)
 class RgbModel:
-    """Colour sensor parameters (units: irradiance is the renderer's linear unit)."""
+    """Colour sensor parameters (irradiance in the renderer's linear unit, signal in [0, 1] before gamma).
+
+    Attributes:
+        max_blur_step_px: largest apparent motion between two motion-blur sub-frames.
+        max_subframes: cap on sub-frames per exposure (bounds the cost of very fast motion).
+        sensitivity: signal per unit irradiance and second at gain 1.
+        full_well: signal-to-electrons scale of the shot noise (variance = signal / full_well).
+        read_noise: standard deviation of the additive read noise (signal units).
+        gamma: output encoding exponent (sRGB-like).
+        ae_target / ae_time_constant_s / gain_limits: auto-gain set point, speed and range.
+        vignetting: share of the cos^4 falloff applied at the image corners.
+    """
 
     max_blur_step_px: float = 1.0
     max_subframes: int = 25
@@ -39,7 +50,14 @@ class RgbModel:
 
 @dataclass(frozen=True)
 class DepthModel:
-    """Depth sensor parameters."""
+    """Depth sensor parameters.
+
+    Attributes:
+        min_m / max_m: valid range (the config's ``rig.depth_min_m``/``depth_max_m`` override them).
+        sigma_at_1m_m: noise standard deviation at 1 m; it grows with z^2 as for stereo.
+        edge_hole_ratio: relative depth jump within 3x3 pixels that leaves a hole.
+        dropout_fraction / dropout_blob_px: share of pixels lost in random blobs of this size.
+    """
 
     min_m: float = 0.3
     max_m: float = 6.0
