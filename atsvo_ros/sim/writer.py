@@ -27,6 +27,8 @@ from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, SimRig,
 
 FORMATS = ("mcap", "sqlite3", "ros1")
 EVENT_MSGS = ("packet", "dvs")
+#: EventPacket encodings that carry absolute time (evt3 holds only a wrapping sensor clock).
+EVENT_ENCODINGS = tuple(e for e in ENCODINGS if e != "evt3")
 RGB_FRAME = "camera_color_optical_frame"
 EVENT_FRAME = "dvxplorer"
 WORLD_FRAME = "world"
@@ -198,8 +200,9 @@ def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event
         raise SimulationError(f"unknown format {fmt!r} (choose one of {', '.join(FORMATS)})")
     if event_msg not in EVENT_MSGS:
         raise SimulationError(f"unknown event message {event_msg!r} (choose one of {', '.join(EVENT_MSGS)})")
-    if encoding not in ENCODINGS:
-        raise SimulationError(f"unknown event encoding {encoding!r} (choose one of {', '.join(ENCODINGS)})")
+    if encoding not in EVENT_ENCODINGS:
+        raise SimulationError(f"event encoding {encoding!r} is not supported here "
+                              f"(choose one of {', '.join(EVENT_ENCODINGS)})")
     out = Path(out)
     rig = sequence_rig(spec)
     topics = layout_topics(rig, spec.layout, event_msg)

@@ -10,10 +10,9 @@ import dataclasses
 import sys
 from collections.abc import Sequence
 
-from atsvo_ros.io.encode import ENCODINGS
 from atsvo_ros.sim.motion import SCENARIOS
 from atsvo_ros.sim.sequence import LAYOUTS, SequenceSpec
-from atsvo_ros.sim.writer import EVENT_MSGS, FORMATS, write_sequence
+from atsvo_ros.sim.writer import EVENT_ENCODINGS, EVENT_MSGS, FORMATS, write_sequence
 from atsvo_ros.tools._cli import run
 
 
@@ -57,7 +56,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--gt-rate", type=float, default=200.0, help="ground-truth pose rate in Hz (default 200)")
     p.add_argument("--event-msg", default="packet", choices=EVENT_MSGS,
                    help="layout robot: event_camera_msgs/EventPacket (packet) or dvs_msgs/EventArray (dvs)")
-    p.add_argument("--encoding", default="libcaer_cmp", choices=ENCODINGS, help="EventPacket encoding")
+    p.add_argument("--encoding", default="libcaer_cmp", choices=EVENT_ENCODINGS, help="EventPacket encoding")
     p.add_argument("--packet-ms", type=float, default=1.0, help="event packet length in ms (default 1)")
     p.add_argument("--event-scale", type=float, default=1.0, help="scale the event sensor size (tests)")
     p.add_argument("--texture-size", type=int, default=512, help="texture side in texels (power of two)")

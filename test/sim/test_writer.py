@@ -149,3 +149,18 @@ def test_output_directory_rules(tmp_path):
     assert (tmp_path / "x" / "notes.txt").read_text() == "mine"
     with pytest.raises(SimulationError, match="format"):
         write_sequence(spec, tmp_path / "y", fmt="zip", progress=False)
+
+
+@pytest.mark.parametrize("encoding", ["libcaer", "mono"])
+def test_other_packet_encodings_round_trip(tmp_path, encoding):
+    spec = SequenceSpec(scenario="bound", duration_s=0.2, seed=4, **TINY)
+    write_sequence(spec, tmp_path / encoding, encoding=encoding, progress=False)
+    _, msgs = _read(tmp_path / encoding, "mcap")
+    assert all(m.encoding == encoding for _, _, m in msgs["/dvxplorer/events"])
+    decoded = EventBatch.concatenate([decode_raw(raw, "event_camera_msgs/msg/EventPacket", 2)
+                                      for _, raw, _ in msgs["/dvxplorer/events"]])
+    events = EventBatch.concatenate([i for i in iter_sequence(spec) if isinstance(i, EventBatch)])
+    np.testing.assert_array_equal(decoded.t, events.t)
+    np.testing.assert_array_equal(decoded.y, events.y)
+    with pytest.raises(SimulationError, match="evt3"):
+        write_sequence(spec, tmp_path / "e", encoding="evt3", progress=False)
