@@ -29,7 +29,7 @@ setup(
         "numpy>=1.24",
         "numba>=0.58",
         "opencv-python-headless>=4.8",
-        "rosbags>=0.10",
+        "rosbags>=0.11",  # reads bare .mcap/.db3 files
         "pyyaml>=6",
         "matplotlib>=3.7",
         "tqdm>=4.60",

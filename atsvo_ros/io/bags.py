@@ -1,8 +1,8 @@
 """Streaming bag reading (ROS 1 .bag, ROS 2 sqlite3 / mcap) with rosbags, no ROS install needed.
 
 :class:`Bag` opens a ROS 1 ``.bag`` file, a ROS 2 bag directory, or a bare ``.mcap`` / ``.db3``
-file (also a directory whose ``metadata.yaml`` is missing or names no storage plugin: a
-metadata file is synthesised next to symlinks in a temporary directory). It resolves the topics
+file (also a directory whose ``metadata.yaml`` is missing or names no storage plugin: its single
+storage file is read directly). It resolves the topics
 the replay needs (explicit names > the configuration's topics > every bundled preset's topics >
 detection by message type and name) and yields the messages merged in time order, one at a time,
 so memory does not grow with the bag. Event messages are decoded from the raw bytes (no per-event
@@ -10,7 +10,6 @@ Python objects) by the stateful decoder of :mod:`atsvo_ros.io.decode`.
 """
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -78,50 +77,12 @@ def _metadata_ok(folder: Path) -> bool:
     return info.get("storage_identifier") in ("sqlite3", "mcap")
 
 
-def _stage(files: list[Path], tmp: Path) -> Path:
-    """Write a metadata.yaml for bare storage files (symlinked into ``tmp``); return the bag dir."""
-    import yaml
-    from rosbags.rosbag2.storage_mcap import McapReader
-    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+def open_any_reader(path: str | Path) -> Any:
+    """An (unopened) rosbags AnyReader for any supported layout; BagError when it is not a bag.
 
-    storage = "mcap" if files[0].suffix == ".mcap" else "sqlite3"
-    counts: dict[tuple[str, str], int] = {}
-    start, end, total = 2**63 - 1, 0, 0
-    for f in files:
-        reader = McapReader(f) if storage == "mcap" else Sqlite3Reader(f)
-        reader.open()
-        try:
-            for c in reader.connections:
-                counts[(c.topic, c.msgtype)] = counts.get((c.topic, c.msgtype), 0) + int(c.msgcount)
-            if storage == "mcap" and reader.statistics:
-                st = reader.statistics
-                start, end, total = min(start, st.start_time), max(end, st.end_time), total + st.message_count
-            elif storage == "sqlite3":
-                lo, hi, n = reader.dbconn.cursor().execute(
-                    "SELECT min(timestamp), max(timestamp), count(*) FROM messages").fetchone()
-                if n:
-                    start, end, total = min(start, lo), max(end, hi), total + n
-        finally:
-            reader.close()
-        (tmp / f.name).symlink_to(f.resolve())
-    if not total:
-        start = end = 0
-    meta = {"rosbag2_bagfile_information": {
-        "version": 5, "storage_identifier": storage,
-        "duration": {"nanoseconds": int(end - start)}, "starting_time": {"nanoseconds_since_epoch": int(start)},
-        "message_count": int(total),
-        "topics_with_message_count": [
-            {"topic_metadata": {"name": t, "type": m, "serialization_format": "cdr", "offered_qos_profiles": ""},
-             "message_count": n} for (t, m), n in counts.items()],
-        "compression_format": "", "compression_mode": "",
-        "relative_file_paths": [f.name for f in files], "files": [],
-    }}
-    (tmp / "metadata.yaml").write_text(yaml.safe_dump(meta))
-    return tmp
-
-
-def open_any_reader(path: str | Path, tmpdir: str | None = None) -> Any:
-    """An (unopened) rosbags AnyReader for any supported bag layout; BagError when it is not a bag."""
+    A bare ``.mcap`` / ``.db3`` file is read directly (rosbags >= 0.11); so is the single storage
+    file of a bag directory whose ``metadata.yaml`` is missing or names no storage plugin.
+    """
     from rosbags.highlevel import AnyReader
 
     from atsvo_ros.io.msgtypes import typestore
@@ -134,26 +95,19 @@ def open_any_reader(path: str | Path, tmpdir: str | None = None) -> Any:
         store = typestore(1)
     else:
         store = typestore(2)
-        if not (p.is_dir() and _metadata_ok(p)):
-            if p.is_file() and p.suffix in (".mcap", ".db3"):
-                files = [p]
-            elif p.is_dir():
-                files = sorted(p.glob("*.mcap")) or sorted(p.glob("*.db3"))
-            else:
-                files = []
-            if not files:
-                raise BagError(f"{p} is not a bag: expected a ROS 1 .bag file, a ROS 2 bag directory "
-                               "or a .mcap / .db3 file")
-            if tmpdir is None:
-                raise BagError(f"{p} needs a staging directory (no usable metadata.yaml)")
-            try:
-                target = _stage(files, Path(tmpdir))
-            except Exception as exc:
-                raise BagError(f"cannot read bag {p}: {exc}") from None
+        if p.is_dir() and not _metadata_ok(p):
+            files = sorted(p.glob("*.mcap")) or sorted(p.glob("*.db3"))
+            if len(files) != 1:
+                raise BagError(f"{p} has no usable metadata.yaml and {len(files)} storage files; "
+                               "expected a ROS 2 bag directory with metadata.yaml or a single .mcap/.db3 file")
+            target = files[0]
+        elif p.is_file() and p.suffix not in (".mcap", ".db3"):
+            raise BagError(f"{p} is not a bag: expected a ROS 1 .bag file, a ROS 2 bag directory "
+                           "or a .mcap / .db3 file")
     try:
         return AnyReader([target], default_typestore=store)
     except Exception as exc:
-        raise BagError(f"cannot open bag {p}: {exc}") from None
+        raise BagError(f"cannot open bag {p}: {_one_line(exc)}") from None
 
 
 # ---------------------------------------------------------------------------- topic resolution
@@ -230,6 +184,32 @@ def _event_decoder(msgtype: str, ros_version: int) -> Any:
     return EventDecoder(msgtype, ros_version)
 
 
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+def _open_with_default_types(reader: Any) -> bool:
+    """Open an AnyReader ignoring the bag's embedded message definitions (bundled typestore instead).
+
+    Mirrors what AnyReader does for bags without definitions; False when the storage itself
+    cannot be opened (then the bag is really unreadable).
+    """
+    from contextlib import ExitStack
+
+    reader.stack = ExitStack()
+    try:
+        for sub in reader.readers:
+            reader.stack.enter_context(sub)
+    except Exception:
+        reader.stack.close()
+        reader.stack = None
+        return False
+    reader.connections = [c for sub in reader.readers for c in sub.connections]
+    reader.typestore = reader.default_typestore
+    return True
+
+
 class Bag:
     """A bag opened for streaming. Use as a context manager.
 
@@ -243,16 +223,20 @@ class Bag:
     def __init__(self, path: str | Path, topics: dict[str, str | None] | None = None,
                  config_topics: dict[str, str] | None = None, presets: Iterable[str] = PRESETS) -> None:
         self.path = Path(path)
-        self._tmp = tempfile.TemporaryDirectory(prefix="atsvo_bag_")
         try:
-            self.reader = open_any_reader(self.path, self._tmp.name)
-            self.reader.open()
+            self.reader = open_any_reader(self.path)
+            try:
+                self.reader.open()
+            except Exception as exc:
+                # Embedded definitions rosbags cannot parse (e.g. some IDL with @verbatim comments):
+                # read with the bundled typestore instead, or report the original error.
+                self.reader = open_any_reader(self.path)
+                if not _open_with_default_types(self.reader):
+                    raise BagError(f"cannot open bag {self.path}: {_one_line(exc)}") from None
         except AtsvoError:
-            self._tmp.cleanup()
             raise
         except Exception as exc:
-            self._tmp.cleanup()
-            raise BagError(f"cannot open bag {self.path}: {exc}") from None
+            raise BagError(f"cannot open bag {self.path}: {_one_line(exc)}") from None
         from atsvo_ros.io.msgtypes import register_event_types
 
         self.ros_version = 2 if self.reader.is2 else 1
@@ -271,7 +255,6 @@ class Bag:
     def close(self) -> None:
         if getattr(self, "reader", None) is not None and self.reader.stack:
             self.reader.close()
-        self._tmp.cleanup()
 
     @property
     def start_ns(self) -> int:

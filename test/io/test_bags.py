@@ -257,3 +257,17 @@ def test_one_topic_serving_two_roles(bags):
         first = bag.first_messages(["rgb", "rgb_info", "event_info"])
         assert set(first) == {"rgb", "rgb_info", "event_info"}
         assert first["rgb_info"].width == 32
+
+
+@pytest.mark.parametrize("rel, n_events", [
+    ("event_camera_py_bags/test_events_2", 360_223 + 211_043),  # mcap, metadata with empty storage id
+    ("event_camera_py_bags/test_events_1.bag", 218_291 + 125_183),  # ROS 1, evt3
+    ("event_camera_py_bags/test_events_1", 218_291 + 125_183),  # ROS 2 sqlite3, evt3
+])
+def test_real_event_bags_stream_every_event(realdata, rel, n_events):
+    with Bag(realdata / rel) as bag:
+        assert bag.selection.events == "/event_camera/events"
+        batches = [m.events for m in bag.messages(["events"])]
+    assert sum(len(b) for b in batches) == n_events
+    t = np.concatenate([b.t for b in batches])
+    assert np.all(np.diff(t) >= 0)
