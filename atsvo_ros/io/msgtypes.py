@@ -1,4 +1,4 @@
-"""rosbags typestores that know the event-camera message types.
+"""rosbags typestores that know the event-camera message types (and tf2_msgs for ROS 1).
 
 The standard stores lack event_camera_msgs, dvs_msgs and dv_ros2_msgs; their definitions are
 registered here from the ``.msg`` texts so that the simulator can write and the replay can read
@@ -41,6 +41,8 @@ DEFINITIONS: dict[str, tuple[str, str]] = {
     "dv_ros_msgs/msg/EventArray": (_array("dv_ros_msgs/Event"), _array("dv_ros_msgs/Event")),
     "dv_ros2_msgs/msg/Event": (_DVS_EVENT_ROS1, _DVS_EVENT_ROS2),
     "dv_ros2_msgs/msg/EventArray": (_array("dv_ros2_msgs/Event"), _array("dv_ros2_msgs/Event")),
+    # /tf_static: in rosbags' ROS 2 store already, missing from its ROS 1 (Noetic) store.
+    "tf2_msgs/msg/TFMessage": ("geometry_msgs/TransformStamped[] transforms\n",) * 2,
 }
 
 EVENT_MSGTYPES = frozenset(n for n in DEFINITIONS if n.endswith(("EventPacket", "EventArray")))

@@ -32,7 +32,6 @@ EVENT_ENCODINGS = tuple(e for e in ENCODINGS if e != "evt3")
 RGB_FRAME = "camera_color_optical_frame"
 EVENT_FRAME = "dvxplorer"
 WORLD_FRAME = "world"
-_TF_MSG = "geometry_msgs/TransformStamped[] transforms\n"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,10 +65,6 @@ class _Messages:
     def __init__(self, ros_version: int) -> None:
         self.ros1 = ros_version == 1
         self.store = typestore(ros_version)
-        if "tf2_msgs/msg/TFMessage" not in self.store.fielddefs:
-            from rosbags.typesys import get_types_from_msg
-
-            self.store.register(get_types_from_msg(_TF_MSG, "tf2_msgs/msg/TFMessage"))
         self.T = self.store.types
         self._seq = 0
 
