@@ -174,6 +174,8 @@ class MappingConfig:
     depth_edge_ratio: float = _f(0.05, 0.0, 10.0, lo_open=True,
                                  doc="reject a point whose 3x3 depth range exceeds this share of its depth")
     max_outlier_frames: int = _f(5, 1, 1000, doc="cull a map point after this many consecutive outlier frames")
+    depth_window_px: int = _f(5, 1, 31, doc="a map point's depth is the mean of the valid depths in this window "
+                                         "(and the depth-edge test spans it); 1 = the pixel's own depth")
 
 
 @dataclass(frozen=True)

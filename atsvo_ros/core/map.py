@@ -30,12 +30,14 @@ class Keyframe:
     n_points: int = 0
 
 
-def valid_depth_mask(depth_m: np.ndarray, rig: RigConfig, edge_ratio: float | None = None) -> np.ndarray:
+def valid_depth_mask(depth_m: np.ndarray, rig: RigConfig, edge_ratio: float | None = None,
+                     window_px: int = 3) -> np.ndarray:
     """True where depth is finite, inside the rig's range and (optionally) not on a depth edge.
 
-    A depth edge is a pixel whose 3x3 neighbourhood spans more than ``edge_ratio`` of its depth:
-    there the colour and depth images disagree most and the back-projected point is unreliable.
-    Pixels next to invalid depth (hole borders, usually occlusion shadows) count as edges.
+    A depth edge is a pixel whose ``window_px`` square neighbourhood spans more than
+    ``edge_ratio`` of its depth: there the colour and depth images disagree most and the
+    back-projected point is unreliable. Pixels next to invalid depth (hole borders, usually
+    occlusion shadows) count as edges.
     """
     import cv2
 
@@ -43,11 +45,28 @@ def valid_depth_mask(depth_m: np.ndarray, rig: RigConfig, edge_ratio: float | No
     ok = np.isfinite(d) & (d >= rig.depth_min_m) & (d <= rig.depth_max_m)
     if edge_ratio is not None:
         filled = np.where(ok, d, 0.0).astype(np.float32)
-        kernel = np.ones((3, 3), np.uint8)
+        kernel = np.ones((window_px, window_px), np.uint8)
         dmax = cv2.dilate(filled, kernel)
         dmin = cv2.erode(filled, kernel)  # an invalid neighbour (0) marks a hole border: rejected too
         ok &= (dmax - dmin) <= edge_ratio * np.where(ok, d, 0.0)
     return ok
+
+
+def smoothed_depth(depth_m: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
+    """Mean of the valid depths in a ``window_px`` square around each pixel (float32, 0 where none).
+
+    Away from depth edges (see :func:`valid_depth_mask`) surfaces are locally planar, so the mean
+    keeps the depth of the centre pixel while dividing stereo noise (which grows with z^2 on a
+    D455) by about ``window_px``.
+    """
+    import cv2
+
+    if window_px <= 1:
+        return np.where(valid, depth_m, 0.0).astype(np.float32)
+    k = (int(window_px), int(window_px))
+    num = cv2.blur(np.where(valid, depth_m, 0.0).astype(np.float32), k, borderType=cv2.BORDER_CONSTANT)
+    den = cv2.blur(valid.astype(np.float32), k, borderType=cv2.BORDER_CONSTANT)
+    return np.where(den > 0, num / np.maximum(den, 1e-6), 0.0).astype(np.float32)
 
 
 def extract_patches(pyramid: list[np.ndarray], uv0: np.ndarray, pattern: np.ndarray,
@@ -177,4 +196,4 @@ class TemporaryEventMap:
         return len(self.points_w)
 
 
-__all__ = ["Keyframe", "PointMap", "TemporaryEventMap", "extract_patches", "valid_depth_mask"]
+__all__ = ["Keyframe", "PointMap", "TemporaryEventMap", "extract_patches", "smoothed_depth", "valid_depth_mask"]

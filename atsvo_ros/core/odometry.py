@@ -23,7 +23,7 @@ from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.geometry import hat, project_to_so3, relative_motion, se3_exp, se3_inv, se3_log
 from atsvo_ros.core.keyframes import assess_health
-from atsvo_ros.core.map import PointMap, extract_patches, valid_depth_mask
+from atsvo_ros.core.map import PointMap, extract_patches, smoothed_depth, valid_depth_mask
 from atsvo_ros.core.photometric import RGB_PATTERN, sample_patches
 from atsvo_ros.core.pyramid import build_pyramid, pyramid_cameras
 from atsvo_ros.core.selection.rgb import select_rgb_pixels
@@ -306,7 +306,7 @@ class Odometry:
             self.map = PointMap(self.n_levels, len(RGB_PATTERN))
         mapping, sel = self.config.mapping, self.config.rgb_selection
         grey = pyr[0][..., 0]
-        ok = valid_depth_mask(depth, self.config.rig, mapping.depth_edge_ratio)
+        ok = valid_depth_mask(depth, self.config.rig, mapping.depth_edge_ratio, max(3, mapping.depth_window_px))
         uv = select_rgb_pixels(grey, sel, mask=ok)
         if len(uv) and len(tracked_uv):
             h, w = grey.shape
@@ -318,7 +318,7 @@ class Odometry:
             uv = uv[~occ[uv[:, 1] // cell, uv[:, 0] // cell]]
         if len(uv) == 0:
             return 0
-        z = depth[uv[:, 1], uv[:, 0]].astype(np.float64)
+        z = smoothed_depth(depth, ok, mapping.depth_window_px)[uv[:, 1], uv[:, 0]].astype(np.float64)
         p_c = self.camera.backproject(uv.astype(np.float64), z)
         patches = extract_patches(pyr, uv, RGB_PATTERN, self._affine if not reset else (0.0, 0.0))
         if reset:
