@@ -22,7 +22,8 @@ Definitions (numpy only; ``evo`` is used in the tests as an independent cross-ch
   truth accumulates at least ``delta_deg`` (1) degree of rotation (``evo_rpe --delta 1
   --delta_unit d``, what the paper's deg/d and cm/d columns use); means over the segments.
   Only segments where ground truth rotates exist; with fewer than one such segment the values
-  are undefined (``None`` in JSON).
+  are undefined (``None`` in JSON). ``extra`` also holds the ratio form: the sum of the per-frame
+  errors over the total ground-truth rotation (``*_sum_ratio``).
 * Divergence: ATE > 5 m, RPE > 1 deg/d or > 20 cm/d. ``diverged_at_s`` is the first time
   (relative to the first matched ground-truth stamp) at which the running ATE RMSE or the running
   per-degree means (once ``min_segments`` segments exist) cross a limit; a diverged run is also
@@ -219,6 +220,17 @@ def angle_segments(T_gt: np.ndarray, delta_deg: float) -> tuple[np.ndarray, np.n
     return np.asarray(starts, np.int64), np.asarray(ends, np.int64)
 
 
+def _ratio_per_deg(T_gt: np.ndarray, rot_f: np.ndarray, trans_f: np.ndarray) -> dict[str, float | None]:
+    """Alternative per-degree figures: summed per-frame errors over the summed GT rotation."""
+    if len(T_gt) < 2:
+        return {"rpe_rot_deg_per_deg_sum_ratio": None, "rpe_trans_cm_per_deg_sum_ratio": None}
+    gt_deg = float(np.sum(rotation_angle_deg(np.swapaxes(T_gt[:-1, :3, :3], -1, -2) @ T_gt[1:, :3, :3])))
+    if gt_deg < 1e-9:
+        return {"rpe_rot_deg_per_deg_sum_ratio": None, "rpe_trans_cm_per_deg_sum_ratio": None}
+    return {"rpe_rot_deg_per_deg_sum_ratio": float(np.sum(rot_f) / gt_deg),
+            "rpe_trans_cm_per_deg_sum_ratio": float(np.sum(trans_f) * 100.0 / gt_deg)}
+
+
 def _mean(x: np.ndarray) -> float | None:
     return float(np.mean(x)) if len(x) else None
 
@@ -289,6 +301,7 @@ def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray,
         "rpe_rot_deg_per_frame_rmse": None if not len(rot_f) else float(np.sqrt(np.mean(rot_f ** 2))),
         "rpe_trans_cm_per_frame_rmse": None if not len(trans_f) else float(np.sqrt(np.mean(trans_f ** 2)) * 100),
         "n_segments_per_deg": len(si),
+        **_ratio_per_deg(T_gt, rot_f, trans_f),
         "delta_deg": opts.delta_deg,
         "max_diff_s": opts.max_diff_s,
         "n_ok_matched": int(np.count_nonzero(ok_all[ie])),

@@ -127,3 +127,12 @@ def test_static_start_paper_alignment_falls_back():
     res = evaluate(gtst, est, EvalOptions(align="paper"))
     assert "fallback" in res.extra["alignment"]
     assert res.metrics["ate_rmse_m"] < 1e-9
+
+
+def test_sum_ratio_per_degree_in_extra():
+    gt = _circle(100)  # 1 deg of rotation per frame
+    T = gt.T_w_b.copy()
+    T[:, :3, 3] += np.arange(100)[:, None] * np.array([0.001, 0, 0])  # 1 mm extra per frame
+    res = evaluate(gt, Trajectory(gt.stamps_ns, T), EvalOptions(align="none"))
+    assert res.extra["rpe_trans_cm_per_deg_sum_ratio"] == pytest.approx(0.1, rel=0.05)
+    assert res.extra["rpe_rot_deg_per_deg_sum_ratio"] == pytest.approx(0.0, abs=1e-6)
