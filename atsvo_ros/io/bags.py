@@ -10,7 +10,7 @@ Python objects) by the stateful decoder of :mod:`atsvo_ros.io.decode`.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -77,16 +77,31 @@ def _metadata_ok(folder: Path) -> bool:
     return info.get("storage_identifier") in ("sqlite3", "mcap")
 
 
-def open_any_reader(path: str | Path) -> Any:
+def open_any_reader(path: str | Path | Sequence[str | Path]) -> Any:
     """An (unopened) rosbags AnyReader for any supported layout; BagError when it is not a bag.
 
     A bare ``.mcap`` / ``.db3`` file is read directly (rosbags >= 0.11); so is the single storage
-    file of a bag directory whose ``metadata.yaml`` is missing or names no storage plugin.
+    file of a bag directory whose ``metadata.yaml`` is missing or names no storage plugin. Several
+    ROS 1 bags (e.g. MVSEC's ``*_data.bag`` and ``*_gt.bag``) are read as one, merged in time.
     """
     from rosbags.highlevel import AnyReader
 
     from atsvo_ros.io.msgtypes import typestore
 
+    if not isinstance(path, (str, Path)):
+        paths = [Path(q) for q in path]
+        if len(paths) != 1:
+            for q in paths:
+                if not q.exists():
+                    raise BagError(f"bag {q} does not exist")
+            if not paths or any(q.suffix != ".bag" for q in paths):
+                raise BagError("several bags can be read together only if all are ROS 1 .bag files, got "
+                               + ", ".join(q.name for q in paths))
+            try:
+                return AnyReader(paths, default_typestore=typestore(1))
+            except Exception as exc:
+                raise BagError(f"cannot open bags {', '.join(map(str, paths))}: {_one_line(exc)}") from None
+        path = paths[0]
     p = Path(path)
     if not p.exists():
         raise BagError(f"bag {p} does not exist")
@@ -214,23 +229,25 @@ class Bag:
     """A bag opened for streaming. Use as a context manager.
 
     Args:
-        path: ROS 1 .bag, ROS 2 bag directory, or .mcap/.db3 file.
+        path: ROS 1 .bag, ROS 2 bag directory, or .mcap/.db3 file; or several ROS 1 .bag files.
         topics: explicit role -> topic names (e.g. ``{"rgb": "/cam/image"}``); they win.
         config_topics: role -> topic from the configuration in use.
         presets: bundled presets whose topic names are tried after the configuration's.
     """
 
-    def __init__(self, path: str | Path, topics: dict[str, str | None] | None = None,
+    def __init__(self, path: str | Path | Sequence[str | Path], topics: dict[str, str | None] | None = None,
                  config_topics: dict[str, str] | None = None, presets: Iterable[str] = PRESETS) -> None:
-        self.path = Path(path)
+        paths = [Path(path)] if isinstance(path, (str, Path)) else [Path(q) for q in path]
+        self.path = paths[0] if len(paths) == 1 else Path(" + ".join(str(q) for q in paths))
+        self._paths = paths
         try:
-            self.reader = open_any_reader(self.path)
+            self.reader = open_any_reader(paths)
             try:
                 self.reader.open()
             except Exception as exc:
                 # Embedded definitions rosbags cannot parse (e.g. some IDL with @verbatim comments):
                 # read with the bundled typestore instead, or report the original error.
-                self.reader = open_any_reader(self.path)
+                self.reader = open_any_reader(paths)
                 if not _open_with_default_types(self.reader):
                     raise BagError(f"cannot open bag {self.path}: {_one_line(exc)}") from None
         except AtsvoError:

@@ -1,7 +1,8 @@
 """``atsvo-replay BAG --out DIR``: run the odometry pipeline over a recorded bag, offline, without ROS.
 
-BAG is a ROS 1 .bag, a ROS 2 bag directory (sqlite3 / mcap), a bare .mcap / .db3 file, or an
-MVSEC ``*_data.hdf5`` file (its ``*_gt.hdf5`` sibling is read for depth and pose).
+BAG is a ROS 1 .bag (several are read as one, e.g. MVSEC's data and gt bags), a ROS 2 bag
+directory (sqlite3 / mcap), a bare .mcap / .db3 file, or an MVSEC ``*_data.hdf5`` file (its
+``*_gt.hdf5`` sibling is read for depth and pose).
 
 Exactly the core the ROS node runs (:class:`atsvo_ros.core.odometry.Odometry` fed by the same
 :class:`~atsvo_ros.io.sync.FrameAssembler`), deterministic, streaming (memory does not grow with
@@ -106,10 +107,10 @@ def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[s
 class _BagSource:
     """A ROS bag as a replay source: messages feed the assembler, poses go to the ground truth."""
 
-    def __init__(self, path: Path, topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> None:
+    def __init__(self, paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> None:
         from atsvo_ros.io.bags import Bag
 
-        self.bag = Bag(path, topics=topics, config_topics=vars(config.topics) if config else None)
+        self.bag = Bag(paths, topics=topics, config_topics=vars(config.topics) if config else None)
         self.topic_types = self.bag.topic_types
 
     def close(self) -> None:
@@ -208,13 +209,15 @@ class _MvsecSource:
         return {}
 
 
-def _open_source(path: Path, topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> Any:
-    if path.suffix.lower() in (".hdf5", ".h5"):
-        return _MvsecSource(path)
-    return _BagSource(path, topics, config)
+def _open_source(paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> Any:
+    if paths[0].suffix.lower() in (".hdf5", ".h5"):
+        if len(paths) > 1:
+            raise BagError("give one MVSEC *_data.hdf5 file (its *_gt.hdf5 sibling is found automatically)")
+        return _MvsecSource(paths[0])
+    return _BagSource(paths, topics, config)
 
 
-def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None = None, *,
+def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, config: AtsvoConfig | None = None, *,
            mode: str | None = None, gt_path: str | Path | None = None, frame: str = "base",
            topics: dict[str, str | None] | None = None, plots: bool = True, progress: bool | None = None,
            odometry_factory: Callable[..., Any] | None = None, eval_options: Any = None) -> ReplayResult:
@@ -234,7 +237,9 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
     out = Path(out_dir)
     notes: list[str] = []
     gt_file = read_tum(gt_path) if gt_path else None
-    source = _open_source(Path(bag_path), topics, config)
+    paths = [Path(bag_path)] if isinstance(bag_path, (str, Path)) else [Path(p) for p in bag_path]
+    name = " + ".join(p.name for p in paths)
+    source = _open_source(paths, topics, config)
     try:
         if config is None:
             preset = detect_preset(source.topic_types)
@@ -294,7 +299,7 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
     finally:
         source.close()
     if not stamps:
-        raise BagError(f"no colour/depth pair could be formed from {bag_path} (sync tolerance "
+        raise BagError(f"no colour/depth pair could be formed from {name} (sync tolerance "
                        f"{config.rig.sync_tolerance_s} s; dropped {sync_stats['dropped_rgb']} colour and "
                        f"{sync_stats['dropped_depth']} depth images)")
     used_mode = "fused" if use_events else "rgbd"
@@ -302,7 +307,7 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
                           np.array([f["tracking_time_s"] for f in frames_info]), wall, bag_duration, notes=notes)
     out.mkdir(parents=True, exist_ok=True)
     est = Trajectory(result.stamps_ns, result.T_odom_x)
-    write_tum(out / "trajectory.tum", est, header=f"atsvo-replay {Path(bag_path).name} mode={used_mode} "
+    write_tum(out / "trajectory.tum", est, header=f"atsvo-replay {name} mode={used_mode} "
               f"frame={'base' if frame == 'base' else 'colour optical'} (T_odom_{frame})")
     tt = result.tracking_time_s
     timing = {"mode": used_mode, "frame": frame, "n_frames": len(stamps), "wall_time_s": wall,
@@ -316,7 +321,7 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
     if gt is None and gt_samples:
         gt = Trajectory(np.asarray([g[0] for g in gt_samples], np.int64),
                         np.stack([g[1] for g in gt_samples])).sorted_unique()
-        write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {Path(bag_path).name}")
+        write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {name}")
     eval_result = None
     if gt is not None:
         from atsvo_ros.eval.metrics import EvalOptions, evaluate
@@ -329,7 +334,7 @@ def replay(bag_path: str | Path, out_dir: str | Path, config: AtsvoConfig | None
     if plots:
         from atsvo_ros.eval.plots import plot_run
 
-        plot_run(out, est, eval_result, title=f"{Path(bag_path).name} ({used_mode})")
+        plot_run(out, est, eval_result, title=f"{name} ({used_mode})")
     return result
 
 
@@ -358,7 +363,8 @@ def _main(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``atsvo-replay``."""
     parser = argparse.ArgumentParser(prog="atsvo-replay", description=__doc__.splitlines()[0])
-    parser.add_argument("bag", help="ROS 1 .bag, ROS 2 bag directory (sqlite3/mcap) or a .mcap/.db3 file")
+    parser.add_argument("bag", nargs="+", help="ROS 1 .bag (several are merged, e.g. MVSEC data + gt), ROS 2 bag "
+                        "directory (sqlite3/mcap), a .mcap/.db3 file, or an MVSEC *_data.hdf5 file")
     parser.add_argument("--out", required=True, help="output directory")
     add_config_args(parser)
     parser.add_argument("--preset", choices=("mini_cheetah", "mvsec", "synthetic"),

@@ -153,6 +153,8 @@ def test_user_errors_exit_1_with_one_line(tmp_path, capsys, monkeypatch, fake):
     ok = write_bag(tmp_path / "ok", "mcap", n_frames=2)
     assert main([str(ok), "--out", out, "--rgb-topic", "/wrong"]) == 1
     assert "/wrong" in _one_line_error(capsys)
+    assert main([str(ok), str(corrupt), "--out", out]) == 1
+    assert "only if all are ROS 1" in _one_line_error(capsys)
 
 
 def _with_fake(fn, fake):
@@ -160,3 +162,26 @@ def _with_fake(fn, fake):
         kwargs["odometry_factory"] = fake
         return fn(*args, **kwargs)
     return wrapped
+
+
+def test_two_ros1_bags_are_merged(tmp_path, fake):
+    """MVSEC ships images/events and depth/pose in two ROS 1 bags: replaying both equals one bag."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    whole = write_bag(tmp_path / "whole", "ros1", n_frames=8)
+    parts = {"a": tmp_path / "a.bag", "b": tmp_path / "b.bag"}
+    with Reader(whole) as reader, Writer(parts["a"]) as wa, Writer(parts["b"]) as wb:
+        conns = {}
+        for conn, t, raw in reader.messages():
+            w = wb if ("depth" in conn.topic or "ground_truth" in conn.topic) else wa
+            if conn.topic not in conns:
+                conns[conn.topic] = w.add_connection(conn.topic, conn.msgtype, msgdef=conn.msgdef.data,
+                                                     md5sum=conn.digest)
+            w.write(conns[conn.topic], t, raw)
+    replay(whole, tmp_path / "o1", load_config("synthetic"), odometry_factory=fake, plots=False, progress=False)
+    replay([parts["a"], parts["b"]], tmp_path / "o2", load_config("synthetic"), odometry_factory=fake, plots=False,
+           progress=False)
+    one = (tmp_path / "o1" / "trajectory.tum").read_text().splitlines()[1:]
+    two = (tmp_path / "o2" / "trajectory.tum").read_text().splitlines()[1:]
+    assert one == two and len(one) == 8
+    assert (tmp_path / "o1" / "metrics.json").read_text() == (tmp_path / "o2" / "metrics.json").read_text()
