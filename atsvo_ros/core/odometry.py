@@ -37,11 +37,15 @@ class RgbdFrame:
 
     ``rgb``: HxWx3 uint8 RGB or HxW uint8/float32 grey, *raw* (still distorted) colour image;
     ``depth_m``: HxW float32 metres aligned to the colour image (0 or NaN = invalid).
+    ``depth_rectified``: the depth already lies on the rectified (pinhole) grid of the colour
+    camera, as MVSEC's ``depth_image_rect`` does, instead of the raw colour grid (only matters for
+    a distorted colour camera).
     """
 
     stamp_ns: int
     rgb: np.ndarray
     depth_m: np.ndarray
+    depth_rectified: bool = False
 
 
 class TrackingStatus(str, Enum):
@@ -147,7 +151,9 @@ class Odometry:
         if self._rectify is not None:
             mx, my = self._rectify
             grey = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            depth = cv2.remap(depth, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+            if not frame.depth_rectified:
+                depth = cv2.remap(depth, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                                  borderValue=0.0)
         return grey, depth
 
     # ------------------------------------------------------------------ main entry

@@ -78,6 +78,20 @@ def test_distorted_camera_is_rectified(room, config):
     assert r.status is TrackingStatus.OK and dt < 2e-3 and dr < 0.1, (dt, dr)
 
 
+def test_depth_already_on_the_rectified_grid(room, config):
+    """MVSEC ships depth_image_rect: depth on the pinhole grid, colour raw."""
+    raw = CameraModel(640, 480, 300.0, 300.0, 322.0, 236.0, "equidistant", (-0.02, 0.01, -0.004, 0.0005))
+    odo = Odometry(config, raw)
+    T_c0_c1 = se3_exp(np.array([0.01, 0.02, -0.01, 0.01, 0.0, 0.005]))
+    for k, T in enumerate([np.eye(4), T_c0_c1]):
+        rgb = _frame(room, raw, T, 0).rgb
+        depth = room.render_depth(raw.pinhole(), T)
+        r = odo.process_frame(RgbdFrame(k * 33 * MS, rgb, depth, depth_rectified=True))
+    T_b_c = config.rig.T_base_rgb_matrix()
+    dt, dr = _err(r.T_odom_base, T_b_c @ T_c0_c1 @ se3_inv(T_b_c))
+    assert r.status is TrackingStatus.OK and dt < 2e-3 and dr < 0.1, (dt, dr)
+
+
 def test_loss_reinitialises_without_jump_or_nan(room, config):
     odo = Odometry(config, CAM)
     step = se3_exp(np.array([0.0, 0.0, 0.01, 0.0, 0.0, 0.0]))
