@@ -349,7 +349,7 @@ def _main(args: argparse.Namespace) -> int:
     topics = {r: getattr(args, f"{r}_topic") for r in TOPIC_FLAGS}
     res = replay(args.bag, args.out, config, mode=args.mode, gt_path=args.gt, frame=args.frame, topics=topics,
                  plots=not args.no_plots, progress=False if args.no_progress else None,
-                 eval_options=EvalOptions(align=args.align, interpolate_gt=not args.nearest_gt))
+                 eval_options=EvalOptions(align=args.align, align_s=args.align_s, interpolate_gt=not args.nearest_gt))
     for note in res.notes:
         print(f"note: {note}")
     print(f"{len(res.stamps_ns)} frames, mode {res.mode}, {res.wall_time_s:.1f} s wall, "
@@ -375,6 +375,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="pose written to trajectory.tum: robot base (default) or colour optical frame")
     parser.add_argument("--align", choices=("paper", "se3", "sim3", "none"), default="paper",
                         help="alignment for metrics.json (default: paper)")
+    parser.add_argument("--align-s", type=float, default=2.0,
+                        help="paper alignment: seconds of matched poses used for the SE(3) step (default 2)")
     parser.add_argument("--nearest-gt", action="store_true",
                         help="pair each frame with the nearest ground-truth pose instead of interpolating")
     for role in TOPIC_FLAGS:
