@@ -240,6 +240,7 @@ class Odometry:
         idx = np.flatnonzero(inliers)
         if len(idx) < 20:
             return self._affine
+        idx = idx[:: max(1, len(idx) // 300)]  # a median over ~300 points is plenty
         cam = self.cameras[lvl]
         p = self.map.points_w[idx] @ T_c_w[:3, :3].T + T_c_w[:3, 3]
         uv, _ = cam.project(p)
