@@ -8,11 +8,13 @@ Definitions (numpy only; ``evo`` is used in the tests as an independent cross-ch
   ground truth is interpolated at the estimate stamps (evo's ``SyncMethod.interpolation``); the
   replay tool uses it because a 100 Hz ground truth is up to 5 ms away from a frame otherwise.
 * Alignment of the estimate onto ground truth (``align``):
-  ``paper`` -- the paper's protocol (Section III): SE(3) Umeyama on the matched poses of the first
-  ``align_s`` seconds (default 2 s, at least 3 poses), then a rotation about the first estimated
-  position so that the first estimated orientation equals ground truth's. When the first seconds
-  hold no usable motion (positions degenerate for Umeyama) the SE(3) step is replaced by moving
-  the first estimated position onto ground truth's. ``se3`` / ``sim3`` -- Umeyama over all
+  ``paper`` -- the paper's protocol (Section III): SE(3) Umeyama on the beginning frames -- the
+  matched poses of the first ``align_s`` seconds (2 s) but at most ``align_fraction`` (20 %) of
+  them and at least 3 -- applied to the whole estimate, then an SO(3) alignment: one constant
+  rotation of the body frame (right-multiplied) that makes the first estimated orientation equal
+  to ground truth's, positions untouched. When ground truth hardly moves in that window (less than
+  ``min_align_spread_m`` off a straight line: Umeyama's rotation would be unobservable), the first
+  pose is put onto ground truth's instead (``evo --align_origin``). ``se3`` / ``sim3`` -- Umeyama over all
   matched poses without / with scale (``evo -a`` / ``-as``). ``none`` -- as is.
 * ATE: RMSE of the position differences of the aligned matched poses.
 * RPE per frame: for consecutive matched pairs, ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``; rotation
@@ -52,7 +54,9 @@ class EvalOptions:
 
     align: str = "paper"
     align_s: float = 2.0
+    align_fraction: float = 0.2
     min_align_poses: int = 3
+    min_align_spread_m: float = 0.01
     max_diff_s: float = 0.01
     delta_deg: float = 1.0
     ate_limit_m: float = 5.0
@@ -88,7 +92,7 @@ class EvalResult:
         extra = dict(self.extra)
         if self.partial is not None:
             extra["partial"] = {k: v for k, v in self.partial.metrics.items()
-                                if k not in ("diverged", "diverged_at_s")}
+                                if k not in ("diverged", "diverged_at_s", "tracked_fraction")}
         out["extra"] = extra
         return out
 
@@ -166,22 +170,25 @@ def align(T_gt: np.ndarray, T_est: np.ndarray, stamps_ns: np.ndarray, opts: Eval
         return _apply_sim3(T_est, R, t, s), {"method": opts.align, "n_poses": n, "scale": s}
     # paper: SE(3) on the beginning frames, then SO(3) on the first orientation.
     t0 = stamps_ns[0]
-    n_align = int(np.searchsorted(stamps_ns, t0 + int(round(opts.align_s * 1e9)), side="right"))
+    n_time = int(np.searchsorted(stamps_ns, t0 + int(round(opts.align_s * 1e9)), side="right"))
+    n_align = min(n_time, int(np.ceil(opts.align_fraction * n)))
     n_align = min(max(n_align, opts.min_align_poses), n)
-    info: dict[str, Any] = {"method": "paper", "n_poses": n_align, "align_s": opts.align_s}
-    try:
-        if n_align < 3:
-            raise EvaluationError("too few poses")
-        R, t, s = umeyama(T_est[:n_align, :3, 3], T_gt[:n_align, :3, 3])
+    info: dict[str, Any] = {"method": "paper", "n_poses": n_align,
+                            "window_s": float((stamps_ns[n_align - 1] - t0) * 1e-9)}
+    window = T_gt[:n_align, :3, 3]
+    spread = np.linalg.svd(window - window.mean(0), compute_uv=False) / np.sqrt(max(n_align, 1))
+    if n_align >= 3 and len(spread) > 1 and spread[1] >= opts.min_align_spread_m:
+        R, t, s = umeyama(T_est[:n_align, :3, 3], window)
         out = _apply_sim3(T_est, R, t, s)
-    except EvaluationError:
-        out = T_est.copy()
-        out[:, :3, 3] += T_gt[0, :3, 3] - T_est[0, :3, 3]
-        info["fallback"] = "first position (no motion in the alignment window)"
-    R_fix = T_gt[0, :3, :3] @ out[0, :3, :3].T
-    p0 = out[0, :3, 3].copy()
-    out[:, :3, :3] = R_fix @ out[:, :3, :3]
-    out[:, :3, 3] = (out[:, :3, 3] - p0) @ R_fix.T + p0
+        # SO(3): a constant body-frame rotation makes the first orientation equal to ground truth's
+        # (positions keep the SE(3) fit).
+        C = out[0, :3, :3].T @ T_gt[0, :3, :3]
+        out[:, :3, :3] = out[:, :3, :3] @ C
+    else:
+        # No usable motion at the start: the first pose is put onto ground truth's (evo --align_origin).
+        out = (T_gt[0] @ se3_inv(T_est[0]))[None] @ T_est
+        info["fallback"] = (f"first pose (ground truth moves less than {opts.min_align_spread_m} m "
+                            "off a line in the alignment window)")
     return out, info
 
 
@@ -269,12 +276,14 @@ def evaluate(gt: Trajectory, est: Trajectory, opts: EvalOptions | None = None,
     T_gt, stamps = gt.T_w_b[ig], est.stamps_ns[ie]
     if opts.interpolate_gt:  # same pairs, ground truth resampled at the estimate stamps (evo's interpolation sync)
         T_gt = interpolate_trajectory(gt.stamps_ns, gt.T_w_b, stamps)[0]
-    T_est, info = align(T_gt, est.T_w_b[ie], stamps, opts)
-    return _score(gt, est, T_gt, T_est, stamps, ok_all, ie, info, opts, _check_divergence)
+    T_raw = est.T_w_b[ie]
+    T_est, info = align(T_gt, T_raw, stamps, opts)
+    return _score(gt, est, T_gt, T_est, T_raw, stamps, ok_all, ie, info, opts, _check_divergence)
 
 
-def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray, stamps: np.ndarray,
-           ok_all: np.ndarray, ie: np.ndarray, info: dict, opts: EvalOptions, check: bool) -> EvalResult:
+def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray, T_raw: np.ndarray,
+           stamps: np.ndarray, ok_all: np.ndarray, ie: np.ndarray, info: dict, opts: EvalOptions,
+           check: bool) -> EvalResult:
     n = len(stamps)
     pos_err = np.linalg.norm(T_est[:, :3, 3] - T_gt[:, :3, 3], axis=1)
     ate = float(np.sqrt(np.mean(pos_err ** 2)))
@@ -319,10 +328,14 @@ def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray,
         if at is None:  # the final value crosses a limit only by the min_segments rule
             at = n - 1
         metrics["diverged_at_s"] = float((stamps[at] - stamps[0]) * 1e-9)
-        if at >= 2:
+        if at >= 3:  # the part before divergence, aligned on its own (diverged poses do not pull the fit)
             sub = slice(0, at)
-            result.partial = _score(gt, est, T_gt[sub], T_est[sub], stamps[sub], ok_all, ie[sub], info, opts, False)
-            result.partial.metrics["tracked_fraction"] = None
+            try:
+                T_sub, info_sub = align(T_gt[sub], T_raw[sub], stamps[sub], opts)
+            except EvaluationError:
+                T_sub, info_sub = T_est[sub], info
+            result.partial = _score(gt, est, T_gt[sub], T_sub, T_raw[sub], stamps[sub], ok_all, ie[sub], info_sub,
+                                    opts, False)
     return result
 
 

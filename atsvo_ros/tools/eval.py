@@ -1,7 +1,8 @@
 """``atsvo-eval GT EST``: ATE / RPE of a TUM trajectory against TUM ground truth, metrics.json and plots.
 
 Alignment ``paper`` (default) is the paper's protocol: SE(3) Umeyama on the first ``--align-s``
-seconds of matched poses, then the first orientation set to ground truth's; ``se3`` / ``sim3``
+seconds of matched poses (at most 20 % of them), then one body-frame rotation that sets the first
+orientation to ground truth's; ``se3`` / ``sim3``
 align over all matched poses (like ``evo_ape -a`` / ``-as``); ``none`` compares as is.
 """
 from __future__ import annotations
