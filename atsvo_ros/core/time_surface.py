@@ -27,8 +27,15 @@ literal formula stays available as ``tau_mode = "eq2_printed"`` for comparison. 
 active neighbours the mean runs over those; a pixel with no active neighbour uses ``tau_u``
 (nothing suggests fast motion there).
 
-Cost: :meth:`AdaptiveTimeSurface.update` keeps, for every pixel, the n latest timestamps of its ring
-exactly (O(16 n) per event), so that rendering needs only O(n) per pixel.
+Cost: events come in time order, so the neighbour that fires is always the newest value of every ring it
+belongs to. :meth:`AdaptiveTimeSurface.update` therefore keeps, per pixel, only *which* ring neighbours are
+its n latest active ones, in recency order (4-bit ring indices packed in an int64, plus the list length): a
+firing neighbour moves to the front and, if it was not a member of a full list, the least recent member
+drops off -- O(1) branch-free bit operations per ring neighbour, independent of n (it was O(n) with the n
+timestamps stored). Rendering reads the members' times from ``t_last`` (O(n) per pixel, as before). The
+result is exactly that of keeping the n latest timestamps (same ties, same clamping of ages at the query
+time); ~20 M events/s at n = 4 and at n = 16 on one core, render unchanged (~0.3 ms at 320x240 on a real
+DVXplorer recording).
 """
 from __future__ import annotations
 
@@ -137,6 +144,10 @@ class AdaptiveTimeSurface(TimeSurface):
     def __init__(self, width: int, height: int, cfg: AtsConfig | None = None) -> None:
         c = cfg or AtsConfig()
         self.ring_dx, self.ring_dy = ring_pattern(c.pattern_radius_px)
+        # state lives on the surface padded by the ring radius, so ring neighbours need no bounds checks
+        self._pad = int(max(np.abs(self.ring_dx).max(), np.abs(self.ring_dy).max()))
+        self._wp = int(width) + 2 * self._pad
+        self._ring_off = (self.ring_dy * self._wp + self.ring_dx).astype(np.int64)
         super().__init__(width, height, c)
         if c.tau_mode not in _TAU_MODES:
             raise ConfigError(f"ats.tau_mode = {c.tau_mode!r}; allowed: {sorted(_TAU_MODES)}")
@@ -148,19 +159,25 @@ class AdaptiveTimeSurface(TimeSurface):
 
     def reset(self) -> None:
         super().reset()
-        n = int(min(self.cfg.n_latest, len(self.ring_dx)))
-        self.top = np.full((self.height, self.width, n), NEVER, np.int64)
+        pad, hp = self._pad, self.height + 2 * self._pad
+        self._n = int(min(self.cfg.n_latest, len(self.ring_dx)))
+        t_pad = np.full((hp, self._wp), NEVER, np.int64)
+        self.t_last = t_pad[pad:pad + self.height, pad:pad + self.width]  # a view: same values, public shape
+        self._t_flat = t_pad.reshape(-1)
+        self._rec = np.zeros(hp * self._wp, np.int64)  # per pixel: ring indices, most recent first (4 bits each)
+        self._cnt = np.zeros(hp * self._wp, np.uint8)  # per pixel: how many of them are valid (<= n)
 
     def _ingest(self, batch: EventBatch) -> int:
-        return int(kern._ats_update(self.t_last, self.top, batch.x, batch.y, batch.t,
-                                    self.ring_dx, self.ring_dy))
+        return int(kern._ats_update(self._t_flat, self._rec, self._cnt, batch.x, batch.y, batch.t, self._ring_off,
+                                    self._n, self.width, self.height, self._wp, self._pad))
 
     def _run(self, t_ns: int | None, want_tau: bool) -> None:
         c = self.cfg
         if want_tau and self._tau.shape != self._out.shape:
             self._tau = np.empty_like(self._out)
-        kern._ats_render(self.t_last, self.top, self._t(t_ns), c.tau_l_s, c.tau_u_s, self._mode,
-                         self._cutoff_s, self._out, self._tau, want_tau)
+        kern._ats_render(self._t_flat, self._rec, self._cnt, self._ring_off, self.width, self.height, self._wp,
+                         self._pad, self._t(t_ns), c.tau_l_s, c.tau_u_s, self._mode, self._cutoff_s, self._out,
+                         self._tau, want_tau)
 
     def render_raw(self, t_ns: int | None = None) -> np.ndarray:
         self._run(t_ns, False)

@@ -91,6 +91,32 @@ def test_ats_with_duplicate_timestamps_matches_reference():
     np.testing.assert_allclose(ats.tau_map(), ref_tau, rtol=1e-5, equal_nan=True)
 
 
+@pytest.mark.parametrize("mode", ["mean_age", "eq2_printed"])
+@pytest.mark.parametrize("n_latest", [1, 4, 16])
+def test_ats_incremental_state_matches_reference_on_long_stream(mode, n_latest):
+    """The O(1)-per-neighbour recency lists against the reference: a long stream in which a few pixels fire
+    again and again (members re-fire, leave and re-enter the n latest), many events share a timestamp, a third
+    of the pixels lie within the ring radius of the border, fed in uneven batches; queried after the last
+    event and before it (ages clamped at 0)."""
+    w, h = 11, 9
+    rng = np.random.default_rng(100 + n_latest)
+    n = 20_000
+    hot = rng.integers(0, w * h, 12)  # half of the events hit these 12 pixels
+    pix = np.where(rng.random(n) < 0.5, rng.choice(hot, n), rng.integers(0, w * h, n))
+    t = 1_700_000_000_000_000_000 + np.sort(rng.integers(0, 400, n)) * 100_000  # ~50 events per timestamp
+    b = EventBatch(pix % w, pix // w, t, rng.integers(0, 2, n), w, h)
+    cfg = AtsConfig(tau_u_s=0.02, tau_l_s=0.001, n_latest=n_latest, tau_mode=mode, **RAW)
+    ats = AdaptiveTimeSurface(w, h, cfg)
+    cuts = np.sort(rng.choice(np.arange(1, n), 12, replace=False))
+    for part in np.split(np.arange(n), cuts):
+        ats.update(b.select(part))
+    for t_q in (int(t[-1]), int(t[-1]) + 3_000_000, int(t[-1]) - 2_000_000):
+        ref_img, ref_tau = _reference_ats(b, w, h, t_q, cfg)
+        np.testing.assert_allclose(ats.tau_map(t_q), ref_tau, rtol=1e-6, equal_nan=True)
+        np.testing.assert_allclose(ats.render_raw(t_q), ref_img, atol=0.5, rtol=1e-5)
+    assert ats.n_skipped == 0 and ats.active_mask().sum() == len(np.unique(pix))
+
+
 def _sweeping_edge(speed_px_s: float, w: int = 120, h: int = 40, x0: int = 5, x1: int = 100) -> EventBatch:
     """A vertical edge crossing columns x0..x1 at ``speed_px_s``; every pixel of a column fires when it passes."""
     xs, ys, ts = [], [], []
