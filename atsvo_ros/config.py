@@ -150,6 +150,8 @@ class TrackerConfig:
     affine_brightness: bool = _f(True, doc="model a per-frame brightness gain (auto-exposure); with zero-mean "
                                  "patches it is measured from patch means, otherwise gain/offset are fitted (DSO)")
     zero_mean_patches: bool = _f(True, doc="remove each patch's mean before comparing (vignetting, uneven light)")
+    max_scale_change: float = _f(1.6, 0.0, 100.0, doc="skip map points now nearer/farther than this factor times "
+                                 "their keyframe depth (patch at another scale); 0 = off")
     max_step_m: float = _f(0.5, 0.0, 100.0, lo_open=True,
                            doc="camera translation per frame beyond which the estimate counts as diverged")
     max_step_rot_deg: float = _f(30.0, 0.0, 180.0, lo_open=True,

@@ -15,7 +15,7 @@ OUTLIER = 2
 
 @njit(cache=True)
 def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, offset, huber, outlier_thr,
-               border, grad_c2, zero_mean, H, g, state):  # pragma: no cover - compiled
+               border, grad_c2, zero_mean, zref, max_scale, H, g, state):  # pragma: no cover - compiled
     """Gauss-Newton system of the patch residuals ``r = I(pi(T_cr T_rw p) + o) - (gain z + offset)``.
 
     Parameters are ``(xi, a, b)``: a left perturbation ``xi`` of ``T_rw`` (twist, translation first),
@@ -24,7 +24,9 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
     by ``c^2 / (c^2 + |grad I|^2)`` (``grad_c2`` = c^2, 0 = off), DSO's guard against edges whose
     sub-pixel blur and occlusions make them unreliable. With ``zero_mean`` each patch's mean is
     removed from the residuals (and Jacobians): brightness that varies slowly over the image
-    (vignetting, uneven light), which one global gain cannot model, then cancels. Returns
+    (vignetting, uneven light), which one global gain cannot model, then cancels. With
+    ``max_scale > 1`` a point whose depth differs from its depth in the host keyframe (``zref``)
+    by more than that factor is skipped: its stored patch shows the scene at another scale. Returns
     ``(energy, n_inliers, n_visible, sum of inlier squared residuals)``. Outliers add a constant
     energy (the Huber cost of a patch at the threshold) and invisible points none, so the energy
     per visible point compares estimates fairly (as DSO's coarse tracker does).
@@ -64,7 +66,7 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
         qx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + T_cr[0, 3]
         qy = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + T_cr[1, 3]
         qz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + T_cr[2, 3]
-        if qz < 1e-3:
+        if qz < 1e-3 or (max_scale > 1.0 and (qz > max_scale * zref[i] or qz * max_scale < zref[i])):
             state[i] = INVISIBLE
             continue
         iz = 1.0 / qz

@@ -103,6 +103,7 @@ class PointMap:
         self.patches = np.zeros((self.n_levels, 0, self.pattern_size), dtype=np.float32)
         self.host = np.zeros(0, dtype=np.int32)
         self.outlier_run = np.zeros(0, dtype=np.int32)
+        self.host_depth = np.zeros(0)
 
     def __len__(self) -> int:
         return len(self.points_w)
@@ -129,6 +130,7 @@ class PointMap:
         self.patches = np.ascontiguousarray(np.concatenate([self.patches, patches], axis=1))
         self.host = np.concatenate([self.host, np.full(len(points_c), kf.kf_id, dtype=np.int32)])
         self.outlier_run = np.concatenate([self.outlier_run, np.zeros(len(points_c), dtype=np.int32)])
+        self.host_depth = np.concatenate([self.host_depth, points_c[:, 2]])
         return kf
 
     def remove_points(self, remove: np.ndarray) -> int:
@@ -140,6 +142,7 @@ class PointMap:
             self.patches = np.ascontiguousarray(self.patches[:, keep])
             self.host = self.host[keep]
             self.outlier_run = self.outlier_run[keep]
+            self.host_depth = self.host_depth[keep]
             for kf in self.keyframes.values():
                 kf.n_points = int((self.host == kf.kf_id).sum())
         return n

@@ -275,7 +275,8 @@ class Odometry:
         return ResidualBlock("rgb", self.map.points_w, self.map.patches, RGB_PATTERN, pyr, self.cameras,
                              weight=self.config.tracker.w_rgb, estimate_affine=self.config.tracker.affine_brightness,
                              coarse_points=self.config.tracker.coarse_level_points,
-                             zero_mean=self.config.tracker.zero_mean_patches)
+                             zero_mean=self.config.tracker.zero_mean_patches, ref_depth=self.map.host_depth,
+                             max_scale_change=self.config.tracker.max_scale_change)
 
     def _track(self, pyr: list[np.ndarray], predicted: np.ndarray) -> TrackResult | None:
         last = self._history[-1][1]

@@ -45,6 +45,9 @@ class ResidualBlock:
             next level, and their pixels are 4x fewer per level anyway.
         zero_mean: compare patches after removing their means (only the gain of the brightness
             model remains): robust to vignetting and uneven lighting.
+        ref_depth: (N,) depth of each point in its host keyframe, for ``max_scale_change``.
+        max_scale_change: skip points now nearer/farther than this factor times their host depth
+            (their stored patch shows another scale); 0 = use every point.
     """
 
     name: str
@@ -59,6 +62,8 @@ class ResidualBlock:
     border_px: float | None = None
     coarse_points: int = 0
     zero_mean: bool = False
+    ref_depth: np.ndarray | None = None
+    max_scale_change: float = 0.0
 
     def __post_init__(self) -> None:
         self.points_w = np.ascontiguousarray(self.points_w, dtype=np.float64).reshape(-1, 3)
@@ -72,25 +77,30 @@ class ResidualBlock:
         if len(self.pyramid) != len(self.cameras):
             raise TrackingError(f"block {self.name}: {len(self.pyramid)} pyramid levels but "
                                 f"{len(self.cameras)} cameras")
+        self.ref_depth = (np.zeros(n) if self.ref_depth is None
+                          else np.ascontiguousarray(self.ref_depth, dtype=np.float64).reshape(-1))
+        if len(self.ref_depth) != n:
+            raise TrackingError(f"block {self.name}: {len(self.ref_depth)} reference depths for {n} points")
         if self.border_px is None:  # the pattern plus the bilinear neighbour must stay inside
             self.border_px = float(np.abs(self.pattern).max(initial=0.0)) + 1.0
         self.state = np.zeros(n, dtype=np.int8)
         self._subsets: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
-    def _level_data(self, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Points, patches and state array used on ``level`` (a strided subset on coarse levels)."""
+    def _level_data(self, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Points, patches, reference depths and state array used on ``level`` (strided subset on coarse levels)."""
         n = len(self.points_w)
         keep = n if level == 0 or self.coarse_points <= 0 else max(self.coarse_points, n >> (2 * level))
         if keep >= n:
             patches = self.patches[level]
             if not patches.flags.c_contiguous:
                 patches = np.ascontiguousarray(patches)
-            return self.points_w, patches, self.state
+            return self.points_w, patches, self.ref_depth, self.state
         if level not in self._subsets:
             stride = n / keep
             idx = np.floor(np.arange(keep) * stride).astype(np.int64)
             self._subsets[level] = (np.ascontiguousarray(self.points_w[idx]),
-                                    np.ascontiguousarray(self.patches[level][idx]), np.zeros(keep, np.int8))
+                                    np.ascontiguousarray(self.patches[level][idx]),
+                                    np.ascontiguousarray(self.ref_depth[idx]), np.zeros(keep, np.int8))
         return self._subsets[level]
 
     @property
@@ -103,12 +113,12 @@ class ResidualBlock:
         cam = self.cameras[level]
         H = np.zeros((8, 8))
         g = np.zeros(8)
-        points, patches, state = self._level_data(level)
+        points, patches, zref, state = self._level_data(level)
         e, n_in, n_vis, sse = kernels._linearise(
             points, patches, self.pyramid[level], self.pattern, cam.fx, cam.fy, cam.cx, cam.cy,
             np.ascontiguousarray(T_rgb_w), self.T_cam_rgb, float(np.exp(affine[0])), float(affine[1]),
             float(huber), float(outlier_thr), float(self.border_px), float(grad_c) ** 2, bool(self.zero_mean),
-            H, g, state)
+            zref, float(self.max_scale_change), H, g, state)
         return H * self.weight, g * self.weight, e * self.weight, int(n_in), int(n_vis), float(sse)
 
 
