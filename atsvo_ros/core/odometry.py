@@ -170,7 +170,7 @@ class Odometry:
         predicted = self._predict(stamp)
 
         if not self._initialised or len(self.map) == 0:
-            first = not self._initialised and not self._history
+            first = self.n_keyframes == 0  # never had a map: still initialising (e.g. no depth yet)
             T_c_w = predicted
             t_track = time.perf_counter() - t0
             n_new = self._insert_keyframe(stamp, T_c_w, pyr, depth, tracked_uv=np.zeros((0, 2)), reset=True)

@@ -112,6 +112,18 @@ def test_loss_reinitialises_without_jump_or_nan(room, config):
     assert np.all(np.isfinite(nxt.T_odom_base)) and np.all(np.isfinite(nxt.covariance))
 
 
+def test_initialising_until_depth_arrives(room, config):
+    odo = Odometry(config, CAM)
+    img, depth = room.render(CAM, np.eye(4), supersample=1)
+    none = np.full_like(depth, np.nan)
+    for k in range(2):
+        r = odo.process_frame(RgbdFrame(k * 33 * MS, img, none))
+        assert r.status is TrackingStatus.INITIALISING and r.n_points == 0 and np.allclose(r.T_odom_base, np.eye(4))
+    r = odo.process_frame(RgbdFrame(2 * 33 * MS, img, depth))
+    assert r.status is TrackingStatus.INITIALISING and r.keyframe_inserted
+    assert odo.process_frame(RgbdFrame(3 * 33 * MS, img, depth)).status is TrackingStatus.OK
+
+
 def test_rejects_bad_input(config):
     odo = Odometry(config, CAM)
     with pytest.raises(ImageError):
