@@ -25,49 +25,51 @@ def _set_last(t_last: np.ndarray, x: np.ndarray, y: np.ndarray, t: np.ndarray) -
     return skipped
 
 
-# Per-pixel ATS state: a recency list of ring indices packed as 4-bit nibbles in an int64 (nibble 0 = the
-# neighbour that fired last) and the list length in a uint8. The SWAR constants below act on all 16 nibbles.
+# Per-pixel ATS state: a recency list of n distinct ring indices packed as 4-bit nibbles in an int64, nibble 0
+# = the neighbour that fired last. It starts as 0, 1, .., n-1 (placeholders: their pixels have not fired, so
+# t_last tells them apart from members); the first neighbour to fire takes the front and pushes one of them out.
 _ONES = np.int64(0x1111111111111111)  # 1 in every nibble
 _NIB_HIGH = np.array([sum(8 << (4 * k) for k in range(c)) for c in range(17)], np.uint64).view(np.int64)
-# _NIB_HIGH[c]: the top bit of each of the first c nibbles (the valid part of a list of length c)
+# _NIB_HIGH[c]: the top bit of each of the first c nibbles
+
+
+def ring_list_init(n: int) -> np.int64:
+    """The initial recency list: ring indices 0 .. n-1 as placeholders (as int64 bits)."""
+    return np.array([sum(k << (4 * k) for k in range(n))], np.uint64).view(np.int64)[0]
 
 
 @njit(inline="always")
-def _ring_touch(rec: np.ndarray, cnt: np.ndarray, p: np.uint64, j: int, n: int, tail_bit: int,
-                nib_high: np.ndarray) -> None:
+def _ring_touch(rec: np.ndarray, p: np.uint64, j: int, high: int, tail_bit: int) -> None:
     """Ring neighbour ``j`` of pixel ``p`` fired: move ``j`` to the front of p's recency list.
 
-    Branch-free: a zero-nibble search (SWAR) of ``list ^ j`` over the first ``cnt`` nibbles finds j's position;
-    if absent, j enters at the front and the nibble at position n-1 falls out (the least recent member when
-    the list is full, an unused nibble otherwise, then the length grows).
+    Branch-free: a zero-nibble search (SWAR) of ``list ^ j`` gives, as the lowest set bit, the top bit of j's
+    nibble if j is listed; ``| tail_bit`` makes it nibble n-1 (the least recent member, or a placeholder)
+    otherwise. That nibble leaves, the ones before it move back by one and j enters at the front.
     """
     lst = rec[p]
-    c = np.int64(cnt[p])
     d = lst ^ (j * _ONES)
-    z = (d - _ONES) & ~d & nib_high[c]  # lowest set bit: top bit of j's nibble, if j is a member
-    found = np.int64(z != 0)
-    b = (z & -z) | (tail_bit & (found - 1))  # top bit of the nibble that leaves
-    cnt[p] = c + ((1 - found) & np.int64(c < n))
+    z = ((d - _ONES) & ~d & high) | tail_bit
+    b = z & -z
     rec[p] = (lst & -(b << 1)) | ((lst & ((b - 1) >> 3)) << 4) | j
 
 
 @njit(cache=True)
-def _ats_update(t_last: np.ndarray, rec: np.ndarray, cnt: np.ndarray, x: np.ndarray, y: np.ndarray,
-                t: np.ndarray, off: np.ndarray, n: int, w: int, h: int, wp: int, pad: int) -> int:
+def _ats_update(t_last: np.ndarray, rec: np.ndarray, x: np.ndarray, y: np.ndarray, t: np.ndarray,
+                off: np.ndarray, n: int, w: int, h: int, wp: int, pad: int) -> int:
     """Per-pixel last time plus, for every pixel, which ring neighbours are its n most recent (active) ones.
 
     The arrays are flat over the surface padded by ``pad`` (>= ring radius) pixels on each side, row length
     ``wp``, so that ring neighbours need no bounds checks (padding pixels keep state nobody reads); ``off[j]``
     is ring offset j as a flat index step. Events come in time order, so the event at q is the newest value
-    for every pixel p = q - off[j] whose ring contains q: q becomes the front of p's recency list of ring
-    indices (:func:`_ring_touch`). The first ``cnt[p]`` (<= n) entries are p's n latest distinct active
-    neighbours, O(1) per neighbour; their times are read from ``t_last`` at render time. Events older than
-    their pixel's last one, or outside the surface, are skipped (returned count).
+    for every pixel p = q - off[j] whose ring contains q: j moves to the front of p's recency list
+    (:func:`_ring_touch`), whose active entries are then p's n latest distinct active neighbours -- O(1) per
+    neighbour; their times are read from ``t_last`` at render time. Events older than their pixel's last one,
+    or outside the surface, are skipped (returned count).
     """
     m = off.shape[0]
     skipped = 0
+    high = _NIB_HIGH[n]
     tail_bit = np.int64(1) << (4 * n - 1)
-    nib_high = _NIB_HIGH
     for i in range(t.shape[0]):
         qx = np.int64(x[i])
         qy = np.int64(y[i])
@@ -81,44 +83,43 @@ def _ats_update(t_last: np.ndarray, rec: np.ndarray, cnt: np.ndarray, x: np.ndar
             continue
         t_last[np.uint64(qi)] = te
         if m == 16:  # the FAST circle: unrolled, constant nibble patterns (~15% faster than the loop)
-            _ring_touch(rec, cnt, np.uint64(qi - off[0]), 0, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[1]), 1, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[2]), 2, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[3]), 3, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[4]), 4, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[5]), 5, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[6]), 6, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[7]), 7, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[8]), 8, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[9]), 9, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[10]), 10, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[11]), 11, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[12]), 12, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[13]), 13, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[14]), 14, n, tail_bit, nib_high)
-            _ring_touch(rec, cnt, np.uint64(qi - off[15]), 15, n, tail_bit, nib_high)
+            _ring_touch(rec, np.uint64(qi - off[0]), 0, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[1]), 1, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[2]), 2, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[3]), 3, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[4]), 4, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[5]), 5, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[6]), 6, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[7]), 7, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[8]), 8, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[9]), 9, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[10]), 10, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[11]), 11, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[12]), 12, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[13]), 13, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[14]), 14, high, tail_bit)
+            _ring_touch(rec, np.uint64(qi - off[15]), 15, high, tail_bit)
         else:
             for j in range(m):
-                _ring_touch(rec, cnt, np.uint64(qi - off[j]), j, n, tail_bit, nib_high)
+                _ring_touch(rec, np.uint64(qi - off[j]), j, high, tail_bit)
     return skipped
 
 
 @njit(cache=True)
-def _ats_render(t_last: np.ndarray, rec: np.ndarray, cnt: np.ndarray, off: np.ndarray, w: int, h: int, wp: int,
-                pad: int, t_ns: int, tau_l_s: float, tau_u_s: float, mode: int, cutoff_age_s: float,
-                out: np.ndarray, tau_out: np.ndarray, want_tau: bool) -> None:
+def _ats_render(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, w: int, h: int, wp: int, pad: int,
+                t_ns: int, tau_l_s: float, tau_u_s: float, mode: int, cutoff_age_s: float, out: np.ndarray,
+                tau_out: np.ndarray, want_tau: bool) -> None:
     """Eq. 1 with the per-pixel tau of Eq. 2 (mode 0: clip(mean age); mode 1: printed max(tau_u - age, tau_l)).
 
-    The mean age runs over the ``cnt`` ring neighbours of p's recency list (see :func:`_ats_update`), read
-    from the padded flat ``t_last``. Pixels that never fired are 0 (tau NaN); pixels older than
-    ``cutoff_age_s`` (where even tau_u leaves < 0.5 grey levels) are 0 without evaluating tau unless
-    ``want_tau``.
+    The mean age runs over the active entries of p's recency list (see :func:`_ats_update`), read from the
+    padded flat ``t_last``. Pixels that never fired are 0 (tau NaN); pixels older than ``cutoff_age_s``
+    (where even tau_u leaves < 0.5 grey levels) are 0 without evaluating tau unless ``want_tau``.
     """
     for yy in range(h):
         row = (yy + pad) * wp + pad
         for xx in range(w):
-            p = np.uint64(row + xx)
-            tl = t_last[p]
+            p = row + xx
+            tl = t_last[np.uint64(p)]
             if tl == NEVER:
                 out[yy, xx] = 0.0
                 if want_tau:
@@ -128,15 +129,19 @@ def _ats_render(t_last: np.ndarray, rec: np.ndarray, cnt: np.ndarray, off: np.nd
             if age_s > cutoff_age_s and not want_tau:
                 out[yy, xx] = 0.0
                 continue
-            k = np.int64(cnt[p])
+            lst = rec[np.uint64(p)]
+            k = 0
+            s = np.int64(0)  # exact; equals a float sum of the ages while they stay below 2**53 ns
+            while k < n:  # members first, then placeholders (never fired)
+                v = t_last[np.uint64(p + off[lst & 15])]
+                if v == NEVER:
+                    break
+                s += max(t_ns - v, 0)
+                lst >>= 4
+                k += 1
             if k == 0:
                 tau = tau_u_s
             else:
-                lst = rec[p]
-                s = np.int64(0)  # exact; equals a float sum of the ages while they stay below 2**53 ns
-                for _ in range(k):
-                    s += max(t_ns - t_last[np.uint64(row + xx + off[lst & 15])], 0)
-                    lst >>= 4
                 mean_age = float(s) * 1e-9 / k
                 if mode == 0:
                     tau = min(max(mean_age, tau_l_s), tau_u_s)

@@ -164,18 +164,18 @@ class AdaptiveTimeSurface(TimeSurface):
         t_pad = np.full((hp, self._wp), NEVER, np.int64)
         self.t_last = t_pad[pad:pad + self.height, pad:pad + self.width]  # a view: same values, public shape
         self._t_flat = t_pad.reshape(-1)
-        self._rec = np.zeros(hp * self._wp, np.int64)  # per pixel: ring indices, most recent first (4 bits each)
-        self._cnt = np.zeros(hp * self._wp, np.uint8)  # per pixel: how many of them are valid (<= n)
+        # per pixel: n ring indices, most recent first (4 bits each); see kern._ats_update
+        self._rec = np.full(hp * self._wp, kern.ring_list_init(self._n), np.int64)
 
     def _ingest(self, batch: EventBatch) -> int:
-        return int(kern._ats_update(self._t_flat, self._rec, self._cnt, batch.x, batch.y, batch.t, self._ring_off,
+        return int(kern._ats_update(self._t_flat, self._rec, batch.x, batch.y, batch.t, self._ring_off,
                                     self._n, self.width, self.height, self._wp, self._pad))
 
     def _run(self, t_ns: int | None, want_tau: bool) -> None:
         c = self.cfg
         if want_tau and self._tau.shape != self._out.shape:
             self._tau = np.empty_like(self._out)
-        kern._ats_render(self._t_flat, self._rec, self._cnt, self._ring_off, self.width, self.height, self._wp,
+        kern._ats_render(self._t_flat, self._rec, self._ring_off, self._n, self.width, self.height, self._wp,
                          self._pad, self._t(t_ns), c.tau_l_s, c.tau_u_s, self._mode, self._cutoff_s, self._out,
                          self._tau, want_tau)
 
