@@ -33,7 +33,7 @@ _NIB_HIGH = np.array([sum(8 << (4 * k) for k in range(c)) for c in range(17)], n
 # _NIB_HIGH[c]: the top bit of each of the first c nibbles
 
 
-def ring_list_init(n: int) -> np.int64:
+def _ring_list_init(n: int) -> np.int64:
     """The initial recency list: ring indices 0 .. n-1 as placeholders (as int64 bits)."""
     return np.array([sum(k << (4 * k) for k in range(n))], np.uint64).view(np.int64)[0]
 
@@ -49,8 +49,8 @@ def _ring_touch(rec: np.ndarray, p: np.uint64, j: int, high: int, tail_bit: int)
     lst = rec[p]
     d = lst ^ (j * _ONES)
     z = ((d - _ONES) & ~d & high) | tail_bit
-    b = z & -z
-    rec[p] = (lst & -(b << 1)) | ((lst & ((b - 1) >> 3)) << 4) | j
+    upto = ((z & -z) << 1) - 1  # nibbles 0 .. position of the leaving one
+    rec[p] = (lst ^ ((lst ^ (lst << 4)) & upto)) | j  # those take their predecessor's value, nibble 0 then j
 
 
 @njit(cache=True)
@@ -82,26 +82,8 @@ def _ats_update(t_last: np.ndarray, rec: np.ndarray, x: np.ndarray, y: np.ndarra
             skipped += 1
             continue
         t_last[np.uint64(qi)] = te
-        if m == 16:  # the FAST circle: unrolled, constant nibble patterns (~15% faster than the loop)
-            _ring_touch(rec, np.uint64(qi - off[0]), 0, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[1]), 1, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[2]), 2, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[3]), 3, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[4]), 4, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[5]), 5, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[6]), 6, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[7]), 7, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[8]), 8, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[9]), 9, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[10]), 10, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[11]), 11, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[12]), 12, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[13]), 13, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[14]), 14, high, tail_bit)
-            _ring_touch(rec, np.uint64(qi - off[15]), 15, high, tail_bit)
-        else:
-            for j in range(m):
-                _ring_touch(rec, np.uint64(qi - off[j]), j, high, tail_bit)
+        for j in range(m):
+            _ring_touch(rec, np.uint64(qi - off[j]), j, high, tail_bit)
     return skipped
 
 

@@ -29,7 +29,8 @@ def _random_events(n, w, h, span_ns, seed):
     return EventBatch(rng.integers(0, w, n), rng.integers(0, h, n), t, rng.integers(0, 2, n), w, h)
 
 
-def _reference_ats(b: EventBatch, w: int, h: int, t_q: int, cfg: AtsConfig) -> tuple[np.ndarray, np.ndarray]:
+def _reference_ats(b: EventBatch, w: int, h: int, t_q: int, cfg: AtsConfig,
+                   ring: list[tuple[int, int]] = FAST16) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 1-2 computed pixel by pixel in plain Python, straight from the paper's description."""
     last: dict[tuple[int, int], int] = {}
     for x, y, t in zip(b.x.tolist(), b.y.tolist(), b.t.tolist()):
@@ -37,7 +38,7 @@ def _reference_ats(b: EventBatch, w: int, h: int, t_q: int, cfg: AtsConfig) -> t
     img = np.zeros((h, w))
     tau = np.full((h, w), np.nan)
     for (x, y), tl in last.items():
-        neighbours = [last[(x + dx, y + dy)] for dx, dy in FAST16 if (x + dx, y + dy) in last]
+        neighbours = [last[(x + dx, y + dy)] for dx, dy in ring if (x + dx, y + dy) in last]
         latest = sorted(neighbours, reverse=True)[: cfg.n_latest]  # inactive pixels never enter the ranking
         if latest:
             age = sum(max(t_q - v, 0) for v in latest) / len(latest) * 1e-9
@@ -92,12 +93,12 @@ def test_ats_with_duplicate_timestamps_matches_reference():
 
 
 @pytest.mark.parametrize("mode", ["mean_age", "eq2_printed"])
-@pytest.mark.parametrize("n_latest", [1, 4, 16])
-def test_ats_incremental_state_matches_reference_on_long_stream(mode, n_latest):
+@pytest.mark.parametrize("n_latest,radius", [(1, 3), (4, 3), (16, 3), (5, 1)])
+def test_ats_incremental_state_matches_reference_on_long_stream(mode, n_latest, radius):
     """The O(1)-per-neighbour recency lists against the reference: a long stream in which a few pixels fire
-    again and again (members re-fire, leave and re-enter the n latest), many events share a timestamp, a third
-    of the pixels lie within the ring radius of the border, fed in uneven batches; queried after the last
-    event and before it (ages clamped at 0)."""
+    again and again (members re-fire, leave and re-enter the n latest), many events share a timestamp, most
+    pixels lie within the ring radius of the border, fed in uneven batches; queried after the last event and
+    before it (ages clamped at 0). Radius 1 (an 8-pixel ring) takes the kernel's generic path."""
     w, h = 11, 9
     rng = np.random.default_rng(100 + n_latest)
     n = 20_000
@@ -105,13 +106,14 @@ def test_ats_incremental_state_matches_reference_on_long_stream(mode, n_latest):
     pix = np.where(rng.random(n) < 0.5, rng.choice(hot, n), rng.integers(0, w * h, n))
     t = 1_700_000_000_000_000_000 + np.sort(rng.integers(0, 400, n)) * 100_000  # ~50 events per timestamp
     b = EventBatch(pix % w, pix // w, t, rng.integers(0, 2, n), w, h)
-    cfg = AtsConfig(tau_u_s=0.02, tau_l_s=0.001, n_latest=n_latest, tau_mode=mode, **RAW)
+    cfg = AtsConfig(tau_u_s=0.02, tau_l_s=0.001, n_latest=n_latest, tau_mode=mode, pattern_radius_px=radius, **RAW)
+    ring = FAST16 if radius == 3 else list(zip(*(d.tolist() for d in ring_pattern(radius))))
     ats = AdaptiveTimeSurface(w, h, cfg)
     cuts = np.sort(rng.choice(np.arange(1, n), 12, replace=False))
     for part in np.split(np.arange(n), cuts):
         ats.update(b.select(part))
     for t_q in (int(t[-1]), int(t[-1]) + 3_000_000, int(t[-1]) - 2_000_000):
-        ref_img, ref_tau = _reference_ats(b, w, h, t_q, cfg)
+        ref_img, ref_tau = _reference_ats(b, w, h, t_q, cfg, ring)
         np.testing.assert_allclose(ats.tau_map(t_q), ref_tau, rtol=1e-6, equal_nan=True)
         np.testing.assert_allclose(ats.render_raw(t_q), ref_img, atol=0.5, rtol=1e-5)
     assert ats.n_skipped == 0 and ats.active_mask().sum() == len(np.unique(pix))
