@@ -1,6 +1,8 @@
 """Private numba kernels of the time surfaces (see :mod:`atsvo_ros.core.time_surface`)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -88,32 +90,27 @@ def _ats_update(t_last: np.ndarray, rec: np.ndarray, x: np.ndarray, y: np.ndarra
 
 
 @njit(cache=True)
-def _ats_render(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, w: int, h: int, wp: int, pad: int,
-                t_ns: int, tau_l_s: float, tau_u_s: float, mode: int, cutoff_age_s: float, out: np.ndarray,
-                tau_out: np.ndarray, want_tau: bool) -> None:
-    """Eq. 1 with the per-pixel tau of Eq. 2 (mode 0: clip(mean age); mode 1: printed max(tau_u - age, tau_l)).
-
-    The mean age runs over the active entries of p's recency list (see :func:`_ats_update`), read from the
-    padded flat ``t_last``. Pixels that never fired are 0 (tau NaN); pixels older than ``cutoff_age_s``
-    (where even tau_u leaves < 0.5 grey levels) are 0 without evaluating tau unless ``want_tau``.
-    """
-    for yy in range(h):
-        row = (yy + pad) * wp + pad
-        for xx in range(w):
-            p = row + xx
-            tl = t_last[np.uint64(p)]
-            if tl == NEVER:
-                out[yy, xx] = 0.0
-                if want_tau:
-                    tau_out[yy, xx] = np.nan
-                continue
-            age_s = max(t_ns - tl, 0) * 1e-9
-            if age_s > cutoff_age_s and not want_tau:
-                out[yy, xx] = 0.0
-                continue
+def _ring_sums(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, row: int, w: int, t_ns: int,
+               t_min: int, s_out: np.ndarray, k_out: np.ndarray) -> None:
+    """For the pixels row .. row + w - 1: sum of the ages (clamped at 0) of their n latest active ring neighbours
+    (exact in int64; equals a float sum of the ages while they stay below 2**53 ns) and how many there are;
+    count -1 for pixels that last fired before ``t_min`` (or never). A pass of its own, so that the scattered
+    loads of many pixels overlap."""
+    m = off.shape[0]
+    for xx in range(w):
+        p = row + xx
+        k = 0
+        s = np.int64(0)
+        if t_last[np.uint64(p)] < t_min:
+            k = -1
+        elif n == m:  # every active ring neighbour counts: no need for the list
+            for j in range(m):
+                v = t_last[np.uint64(p + off[j])]
+                if v != NEVER:
+                    k += 1
+                    s += max(t_ns - v, 0)
+        else:
             lst = rec[np.uint64(p)]
-            k = 0
-            s = np.int64(0)  # exact; equals a float sum of the ages while they stay below 2**53 ns
             while k < n:  # members first, then placeholders (never fired)
                 v = t_last[np.uint64(p + off[lst & 15])]
                 if v == NEVER:
@@ -121,10 +118,43 @@ def _ats_render(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, w:
                 s += max(t_ns - v, 0)
                 lst >>= 4
                 k += 1
+        s_out[xx] = s
+        k_out[xx] = k
+
+
+@njit(cache=True)
+def _ats_render(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, w: int, h: int, wp: int, pad: int,
+                t_ns: int, tau_l_s: float, tau_u_s: float, mode: int, cutoff_age_s: float, out: np.ndarray,
+                tau_out: np.ndarray, want_tau: bool) -> None:
+    """Eq. 1 with the per-pixel tau of Eq. 2 (mode 0: clip(mean age); mode 1: printed max(tau_u - age, tau_l)).
+
+    The mean age runs over the active entries of p's recency list (see :func:`_ats_update`), read from the
+    padded flat ``t_last`` one row at a time (:func:`_ring_sums`). Pixels that never fired are 0 (tau NaN);
+    pixels older than ``cutoff_age_s`` (where even tau_u leaves < 0.5 grey levels) are 0 without evaluating
+    tau unless ``want_tau``.
+    """
+    s_row = np.empty(w, np.int64)
+    k_row = np.empty(w, np.int64)
+    # every pixel that fired if want_tau, else those within the cutoff (with 1 ms to spare for rounding)
+    t_min = NEVER + 1 if want_tau else t_ns - int(math.ceil(cutoff_age_s * 1e9)) - 1_000_000
+    for yy in range(h):
+        row = (yy + pad) * wp + pad
+        _ring_sums(t_last, rec, off, n, row, w, t_ns, t_min, s_row, k_row)
+        for xx in range(w):
+            k = k_row[xx]
+            if k < 0:  # never fired, or far beyond the cutoff
+                out[yy, xx] = 0.0
+                if want_tau:
+                    tau_out[yy, xx] = np.nan
+                continue
+            age_s = max(t_ns - t_last[np.uint64(row + xx)], 0) * 1e-9
+            if age_s > cutoff_age_s and not want_tau:
+                out[yy, xx] = 0.0
+                continue
             if k == 0:
                 tau = tau_u_s
             else:
-                mean_age = float(s) * 1e-9 / k
+                mean_age = float(s_row[xx]) * 1e-9 / k
                 if mode == 0:
                     tau = min(max(mean_age, tau_l_s), tau_u_s)
                 else:
