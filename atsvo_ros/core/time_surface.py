@@ -32,13 +32,13 @@ belongs to. :meth:`AdaptiveTimeSurface.update` therefore keeps, per pixel, only 
 its n latest active ones, in recency order: n ring indices packed as 4-bit nibbles in one int64, starting
 as placeholders (neighbours that have not fired, told apart by ``t_last``). The firing neighbour moves to the
 front and, if it was not listed, the last entry (the least recent member, or a placeholder) drops out -- a
-few branch-free bit operations, one load and one store per ring neighbour whatever n (it was O(n) with the n
-timestamps stored, and the state n times larger). Rendering reads the members' times from ``t_last``, O(n)
-per pixel as before. The result is exactly that of keeping the n latest timestamps (ties and the clamping of
-ages at the query time included). State lives on the surface padded by the ring radius, so ring neighbours
-need no bounds checks. Measured on one core: ~30 M events/s for any n (was ~10 M/s at n = 4, ~1.5 M/s at
-n = 16), render unchanged (~0.3 ms at 320x240 on a real DVXplorer recording, ~1 ms when every pixel fired
-within the decay window).
+few branch-free bit operations, one load and one store per ring neighbour whatever n (it used to store the n
+timestamps themselves and scan them, O(n)). Rendering reads the members' times from ``t_last``, O(n) per
+pixel as before. For time-ordered events the result is exactly that of keeping the n latest timestamps (ties
+and the clamping of ages at the query time included). State lives on the surface padded by the ring radius,
+so ring neighbours need no bounds checks. Measured on one (shared) core: 25-30 M events/s for any n (was
+~10 M/s at n = 4, ~2 M/s at n = 16); render about as before: ~0.3 ms at 320x240 on a real DVXplorer
+recording, ~1 ms when every pixel fired within the decay window.
 """
 from __future__ import annotations
 
