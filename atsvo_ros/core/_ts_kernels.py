@@ -40,13 +40,14 @@ def _ring_list_init(n: int) -> np.int64:
     return np.array([sum(k << (4 * k) for k in range(n))], np.uint64).view(np.int64)[0]
 
 
-@njit(inline="always")
+@njit(cache=True, inline="always")
 def _ring_touch(rec: np.ndarray, p: np.uint64, j: int, high: int, tail_bit: int) -> None:
     """Ring neighbour ``j`` of pixel ``p`` fired: move ``j`` to the front of p's recency list.
 
     Branch-free: a zero-nibble search (SWAR) of ``list ^ j`` gives, as the lowest set bit, the top bit of j's
     nibble if j is listed; ``| tail_bit`` makes it nibble n-1 (the least recent member, or a placeholder)
-    otherwise. That nibble leaves, the ones before it move back by one and j enters at the front.
+    otherwise. That nibble leaves, the ones before it move back by one and j enters at the front. Relies on
+    int64 arithmetic wrapping around (as numba's does): at n = 16 the tail bit is the sign bit.
     """
     lst = rec[p]
     d = lst ^ (j * _ONES)
