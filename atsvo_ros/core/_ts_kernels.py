@@ -92,19 +92,20 @@ def _ats_update(t_last: np.ndarray, rec: np.ndarray, x: np.ndarray, y: np.ndarra
 
 @njit(cache=True)
 def _ring_sums(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, row: int, w: int, t_ns: int,
-               t_min: int, s_out: np.ndarray, k_out: np.ndarray) -> None:
-    """For the pixels row .. row + w - 1: sum of the ages (clamped at 0) of their n latest active ring neighbours
-    (exact in int64; equals a float sum of the ages while they stay below 2**53 ns) and how many there are;
-    count -1 for pixels that last fired before ``t_min`` (or never). A pass of its own, so that the scattered
-    loads of many pixels overlap."""
+               t_min: int, idx: np.ndarray, s_out: np.ndarray, k_out: np.ndarray) -> int:
+    """For the pixels of row .. row + w - 1 that fired at or after ``t_min``, returned as the first entries of
+    ``idx`` (their count returned): sum of the ages (clamped at 0) of their n latest active ring neighbours
+    (exact in int64; equals a float sum of the ages while they stay below 2**53 ns) and how many there are.
+    A pass of its own, so that the scattered loads of many pixels overlap and Eq. 1 runs over these only."""
     m = off.shape[0]
+    c = 0
     for xx in range(w):
         p = row + xx
+        if t_last[np.uint64(p)] < t_min:
+            continue
         k = 0
         s = np.int64(0)
-        if t_last[np.uint64(p)] < t_min:
-            k = -1
-        elif n == m:  # every active ring neighbour counts: no need for the list
+        if n == m:  # every active ring neighbour counts: no need for the list
             for j in range(m):
                 v = t_last[np.uint64(p + off[j])]
                 if v != NEVER:
@@ -119,8 +120,11 @@ def _ring_sums(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, row
                 s += max(t_ns - v, 0)
                 lst >>= 4
                 k += 1
-        s_out[xx] = s
-        k_out[xx] = k
+        idx[c] = xx
+        s_out[c] = s
+        k_out[c] = k
+        c += 1
+    return c
 
 
 @njit(cache=True)
@@ -134,28 +138,26 @@ def _ats_render(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, w:
     pixels older than ``cutoff_age_s`` (where even tau_u leaves < 0.5 grey levels) are 0 without evaluating
     tau unless ``want_tau``.
     """
+    idx = np.empty(w, np.int64)
     s_row = np.empty(w, np.int64)
     k_row = np.empty(w, np.int64)
     # every pixel that fired if want_tau, else those within the cutoff (with 1 ms to spare for rounding)
     t_min = NEVER + 1 if want_tau else t_ns - int(math.ceil(cutoff_age_s * 1e9)) - 1_000_000
+    out[:] = 0.0
+    if want_tau:
+        tau_out[:] = np.nan
     for yy in range(h):
         row = (yy + pad) * wp + pad
-        _ring_sums(t_last, rec, off, n, row, w, t_ns, t_min, s_row, k_row)
-        for xx in range(w):
-            k = k_row[xx]
-            if k < 0:  # never fired, or far beyond the cutoff
-                out[yy, xx] = 0.0
-                if want_tau:
-                    tau_out[yy, xx] = np.nan
-                continue
+        for i in range(_ring_sums(t_last, rec, off, n, row, w, t_ns, t_min, idx, s_row, k_row)):
+            xx = idx[i]
             age_s = max(t_ns - t_last[np.uint64(row + xx)], 0) * 1e-9
             if age_s > cutoff_age_s and not want_tau:
-                out[yy, xx] = 0.0
                 continue
+            k = k_row[i]
             if k == 0:
                 tau = tau_u_s
             else:
-                mean_age = float(s_row[xx]) * 1e-9 / k
+                mean_age = float(s_row[i]) * 1e-9 / k
                 if mode == 0:
                     tau = min(max(mean_age, tau_l_s), tau_u_s)
                 else:

@@ -37,8 +37,9 @@ timestamps themselves and scan them, O(n)). Rendering reads the members' times f
 pixel as before. For time-ordered events the result is exactly that of keeping the n latest timestamps (ties
 and the clamping of ages at the query time included). State lives on the surface padded by the ring radius,
 so ring neighbours need no bounds checks. Measured on one (shared) core: 25-30 M events/s for any n (was
-~10 M/s at n = 4, ~2 M/s at n = 16); render about as before: ~0.3 ms at 320x240 on a real DVXplorer
-recording, ~1 ms when every pixel fired within the decay window.
+~10 M/s at n = 4, ~2 M/s at n = 16). Render (only pixels within the decay cutoff are evaluated): ~0.2 ms
+at 320x240 on a real DVXplorer recording (was ~0.28 ms), ~1 ms when every pixel fired within the decay
+window (as before: Eq. 1's exp and divisions dominate).
 """
 from __future__ import annotations
 
