@@ -136,7 +136,8 @@ class TrackerConfig:
                                   doc="map points used on level l > 0: max(this, N / 4^l), 0 = all (speed)")
     max_iterations: int = _f(20, 1, 200, doc="Gauss-Newton/LM iterations per pyramid level")
     huber_delta: float = _f(9.0, 0.0, 255.0, lo_open=True, doc="Huber threshold on the patch residual (intensity)")
-    outlier_threshold: float = _f(40.0, 0.0, 1000.0, lo_open=True, doc="residual above which a point is an outlier")
+    outlier_threshold: float = _f(20.0, 0.0, 1000.0, lo_open=True,
+                                  doc="RMS patch residual (intensity) above which a point is an outlier")
     convergence_eps: float = _f(1e-4, 0.0, 1.0, lo_open=True,
                                 doc="stop when the update norm (m, rad) falls below this (x2 per pyramid level)")
     w_rgb: float = _f(1.0, 0.0, 1e6, doc="omega_1 of Eq. 4")
