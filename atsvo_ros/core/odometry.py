@@ -37,9 +37,10 @@ class RgbdFrame:
 
     ``rgb``: HxWx3 uint8 RGB or HxW uint8/float32 grey, *raw* (still distorted) colour image;
     ``depth_m``: HxW float32 metres aligned to the colour image (0 or NaN = invalid).
-    ``depth_rectified``: the depth already lies on the rectified (pinhole) grid of the colour
-    camera, as MVSEC's ``depth_image_rect`` does, instead of the raw colour grid (only matters for
-    a distorted colour camera).
+    ``depth_rectified``: the depth already lies on the undistorted pinhole grid with the colour
+    camera's own K (``CameraModel.pinhole()``) instead of the raw colour grid (only matters for a
+    distorted colour camera). MVSEC's ``depth_image_rect`` is *not* such a grid (stereo rectified:
+    other K and a rotation); use its ``depth_image_raw``, which lies on the raw grid.
     """
 
     stamp_ns: int

@@ -2,7 +2,7 @@
 
 Layout (per camera, ``davis/left`` by default): ``events`` (N, 4) float64 rows ``[x, y, t_s, p]``
 with p in {-1, 1}; ``image_raw`` (N, H, W) uint8 with ``image_raw_ts`` (s); in the gt file
-``depth_image_rect`` (N, H, W) float32 metres (NaN = no depth) with ``depth_image_rect_ts`` and
+``depth_image_raw`` (N, H, W) float32 metres (NaN = no depth) with ``depth_image_raw_ts`` and
 ``pose`` (N, 4, 4) with ``pose_ts``. Datasets are read in slices (h5py), so memory does not
 depend on the sequence length. Needs the ``mvsec`` extra (h5py).
 """
@@ -86,7 +86,7 @@ class MvsecReader:
 
     def has(self, role: str) -> bool:
         """Whether the files hold ``rgb``, ``depth``, ``events`` or ``ground_truth``."""
-        name = {"rgb": "image_raw", "depth": "depth_image_rect", "events": "events", "ground_truth": "pose"}[role]
+        name = {"rgb": "image_raw", "depth": "depth_image_raw", "events": "events", "ground_truth": "pose"}[role]
         return self._get(name) is not None
 
     def ground_truth(self):
@@ -127,7 +127,7 @@ class MvsecReader:
         if "rgb" in roles:
             sources.append(self._images("image_raw", "rgb"))
         if "depth" in roles:
-            sources.append(self._images("depth_image_rect", "depth"))
+            sources.append(self._images("depth_image_raw", "depth"))
         if "events" in roles:
             sources.append(self._events())
         yield from heapq.merge(*sources, key=lambda item: item.stamp_ns)

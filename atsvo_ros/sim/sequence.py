@@ -82,8 +82,8 @@ class SequenceSpec:
 
 @dataclass(frozen=True)
 class RgbdFrame:
-    """One colour + depth pair. ``depth_mm`` is 0 where invalid; for layout mvsec it lies on the
-    rectified (pinhole) grid of the colour camera, otherwise it is aligned to the colour image."""
+    """One colour + depth pair. ``depth_mm`` is 0 where invalid and lies on the colour image's own
+    (raw) pixel grid in both layouts, as the D455's aligned depth and MVSEC's depth_image_raw do."""
 
     stamp_ns: int
     rgb: np.ndarray
@@ -138,7 +138,7 @@ def sequence_rig(spec: SequenceSpec) -> SimRig:
     ev = cfg.event_camera.model()
     ew, eh = max(4, round(ev.width * spec.event_scale)), max(4, round(ev.height * spec.event_scale))
     ev = _scaled(ev, ew / ev.width, eh / ev.height, ew, eh)
-    depth_cam = rgb.pinhole() if spec.layout == "mvsec" else rgb
+    depth_cam = rgb  # both layouts: depth on the raw colour grid (D455 aligned depth, MVSEC depth_image_raw)
     if spec.layout == "robot" and rgb.is_distorted:
         raise SimulationError("layout robot needs an undistorted colour camera (depth is aligned to it)")
     mount = load_config("synthetic").rig.T_base_rgb_matrix()

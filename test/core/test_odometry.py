@@ -79,7 +79,7 @@ def test_distorted_camera_is_rectified(room, config):
 
 
 def test_depth_already_on_the_rectified_grid(room, config):
-    """MVSEC ships depth_image_rect: depth on the pinhole grid, colour raw."""
+    """Depth already on the pinhole grid of the colour camera (depth_rectified=True), colour raw."""
     raw = CameraModel(640, 480, 300.0, 300.0, 322.0, 236.0, "equidistant", (-0.02, 0.01, -0.004, 0.0005))
     odo = Odometry(config, raw)
     T_c0_c1 = se3_exp(np.array([0.01, 0.02, -0.01, 0.01, 0.0, 0.005]))

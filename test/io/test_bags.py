@@ -204,12 +204,12 @@ def test_detection_by_type_for_unknown_names():
 
 def test_mvsec_preset_topics():
     topics = {"/davis/left/image_raw": "sensor_msgs/msg/Image", "/davis/right/image_raw": "sensor_msgs/msg/Image",
-              "/davis/left/depth_image_rect": "sensor_msgs/msg/Image", "/davis/left/events": "dvs_msgs/msg/EventArray",
+              "/davis/left/depth_image_raw": "sensor_msgs/msg/Image", "/davis/left/events": "dvs_msgs/msg/EventArray",
               "/davis/right/events": "dvs_msgs/msg/EventArray", "/davis/left/pose": "geometry_msgs/msg/PoseStamped",
               "/davis/left/camera_info": "sensor_msgs/msg/CameraInfo"}
     sel = resolve_topics(topics)
     assert (sel.rgb, sel.depth, sel.events, sel.ground_truth) == (
-        "/davis/left/image_raw", "/davis/left/depth_image_rect", "/davis/left/events", "/davis/left/pose")
+        "/davis/left/image_raw", "/davis/left/depth_image_raw", "/davis/left/events", "/davis/left/pose")
 
 
 def test_missing_role_error_names_topics(bags, tmp_path):

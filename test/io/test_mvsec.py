@@ -30,8 +30,8 @@ def write_mvsec(folder, n_img: int = 5, n_ev: int = 1000, hz: float = 20.0, spli
         g = f.require_group("davis/left")
         depth = np.full((n_img, 260, 346), 2.0, np.float32)
         depth[:, :10] = np.nan
-        g.create_dataset("depth_image_rect", data=depth)
-        g.create_dataset("depth_image_rect_ts", data=t_img + 0.002)
+        g.create_dataset("depth_image_raw", data=depth)
+        g.create_dataset("depth_image_raw_ts", data=t_img + 0.002)
         n_pose = n_img * 5
         pose = np.repeat(np.eye(4)[None], n_pose, 0)
         pose[:, 0, 3] = np.linspace(0, 1, n_pose)

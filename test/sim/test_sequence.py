@@ -180,7 +180,7 @@ def test_rig_follows_config_and_size_overrides():
     assert rig.rgb_camera.cx == pytest.approx((319.5 + 0.5) / 2 - 0.5)
     assert rig.event_camera.width == 320 and rig.event_camera.distortion_model == "plumb_bob"
     mv = sequence_rig(SequenceSpec(layout="mvsec"))
-    assert mv.rgb_camera.distortion_model == "equidistant" and not mv.depth_camera.is_distorted
+    assert mv.rgb_camera.distortion_model == "equidistant" and mv.depth_camera == mv.rgb_camera  # depth_image_raw
     np.testing.assert_allclose(mv.T_base_rgb, np.eye(4))
 
 

@@ -36,7 +36,7 @@ MVSEC_TOPICS = {
     "/davis/left/events": "dvs_msgs/msg/EventArray",
     "/davis/left/image_raw": "sensor_msgs/msg/Image",
     "/davis/left/camera_info": "sensor_msgs/msg/CameraInfo",
-    "/davis/left/depth_image_rect": "sensor_msgs/msg/Image",
+    "/davis/left/depth_image_raw": "sensor_msgs/msg/Image",
     "/davis/left/pose": "geometry_msgs/msg/PoseStamped",
 }
 
@@ -64,7 +64,7 @@ def test_every_scenario_format_and_layout_reads_back(tmp_path, scenario, fmt, la
     n_frames = int(np.floor(duration * spec.rate_hz + 1e-9)) + 1
     n_poses = int(np.floor(duration * spec.gt_rate_hz + 1e-9)) + 1
     for topic in types:
-        if topic.endswith(("image_raw", "camera_info", "depth_image_rect")):
+        if topic.endswith(("image_raw", "camera_info", "depth_image_raw")):
             assert len(msgs[topic]) == n_frames, topic
     gt_topic = "/ground_truth/pose" if layout == "robot" else "/davis/left/pose"
     assert len(msgs[gt_topic]) == n_poses == summary["poses"]
@@ -128,7 +128,7 @@ def test_dvs_event_arrays_and_mvsec_depth(tmp_path):
     write_sequence(mv, tmp_path / "m", fmt="sqlite3", progress=False)
     _, msgs = _read(tmp_path / "m", "sqlite3")
     img = msgs["/davis/left/image_raw"][0][2]
-    depth = msgs["/davis/left/depth_image_rect"][0][2]
+    depth = msgs["/davis/left/depth_image_raw"][0][2]
     assert img.encoding == "mono8" and depth.encoding == "32FC1"
     d = depth.data.view("<f4")
     assert np.isnan(d).any() or np.all(d > 0)
