@@ -8,6 +8,7 @@ Failures are logged, counted in :attr:`TrackingPipeline.counters` and survived.
 """
 from __future__ import annotations
 
+import struct
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,6 +30,15 @@ class PipelineOutput:
 
     result: Any  # atsvo_ros.core.odometry.OdometryResult
     twist: np.ndarray | None
+
+
+def _cdr_stamp_ns(raw: bytes | bytearray | memoryview) -> int | None:
+    """header.stamp of a serialized ROS 2 message whose first field is a std_msgs/Header."""
+    if len(raw) < 12:
+        return None
+    order = "<" if bytes(raw[1:2]) == b"\x01" else ">"
+    sec, nanosec = struct.unpack_from(order + "iI", raw, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def _no_log(level: str, text: str) -> None:
@@ -71,7 +81,11 @@ class TrackingPipeline:
             self.event_camera = self._camera(msg, "event")
 
     def on_events(self, msg: Any, msgtype: str) -> None:
-        """One event message (EventPacket or dvs/dv EventArray), decoded into the frame assembler."""
+        """One event message (EventPacket or dvs/dv EventArray), decoded into the frame assembler.
+
+        ``msg`` is a deserialized message or its serialized CDR bytes (what an rclpy subscription
+        with ``raw=True`` delivers): the bytes path never builds one Python object per event.
+        """
         if not self.use_events:
             return
         from atsvo_ros.io.decode import EventDecoder
@@ -80,13 +94,18 @@ class TrackingPipeline:
         if self._decoder is None:
             cam = self.event_camera or self.config.event_camera.model()
             self._decoder = EventDecoder(msgtype, 2, cam.width, cam.height)
-        batch = self._decoder.decode_message(msg)
+        if isinstance(msg, (bytes, bytearray, memoryview)):
+            batch = self._decoder.decode_raw(msg)
+            # CDR: 4-byte encapsulation header, then header.stamp (int32 sec, uint32 nanosec).
+            mark = _cdr_stamp_ns(msg)
+        else:
+            batch = self._decoder.decode_message(msg)
+            try:
+                mark = stamp_ns(msg)
+            except (AttributeError, TypeError):
+                mark = None
         self.counters["event_msgs"] += 1
         self.counters["events"] += len(batch)
-        try:
-            mark = stamp_ns(msg)
-        except (AttributeError, TypeError):
-            mark = None
         self.assembler.add_events(batch, complete_to_ns=mark)
 
     def on_rgbd(self, rgb_msg: Any, depth_msg: Any) -> PipelineOutput | None:

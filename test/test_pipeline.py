@@ -24,20 +24,23 @@ def bag(tmp_path_factory) -> Path:
     return out
 
 
-def _messages(bag: Path):
+def _messages(bag: Path, raw_events: bool = False):
     from rosbags.highlevel import AnyReader
 
     with AnyReader([bag]) as reader:
         register_event_types(reader.typestore, 2)
         for conn, _, raw in reader.messages():
-            yield conn.topic, conn.msgtype, reader.deserialize(raw, conn.msgtype)
+            if raw_events and conn.msgtype.endswith("EventPacket"):
+                yield conn.topic, conn.msgtype, bytes(raw)
+            else:
+                yield conn.topic, conn.msgtype, reader.deserialize(raw, conn.msgtype)
 
 
-def _run(bag: Path, cfg) -> tuple[TrackingPipeline, list]:
-    pipe = TrackingPipeline(cfg)
+def _run(bag: Path, cfg, factory=None, raw_events: bool = False) -> tuple[TrackingPipeline, list]:
+    pipe = TrackingPipeline(cfg, odometry_factory=factory)
     topics = cfg.topics
     outputs, rgb, depth = [], {}, {}
-    for topic, msgtype, msg in _messages(bag):
+    for topic, msgtype, msg in _messages(bag, raw_events):
         if topic == topics.rgb_info:
             pipe.on_rgb_camera_info(msg)
         elif topic == topics.event_info:
@@ -96,3 +99,41 @@ def test_frames_wait_for_camera_info_and_bad_images_are_counted(bag):
     bad = dataclasses.replace(rgb_msg, encoding="bayer_rggb8")
     assert pipe.on_rgbd(bad, depth_msg) is None
     assert pipe.counters["frames_rejected"] == 1
+
+
+def test_events_reach_the_core_cut_at_frame_stamps_from_messages_or_raw_bytes(bag):
+    """With a core that fuses events, both input paths hand it the same events, cut at frame stamps."""
+    from atsvo_ros.core.events import EventBatch
+    from atsvo_ros.core.odometry import Odometry
+
+    class Recording(Odometry):
+        supports_events = True
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.batches: list[tuple[int, EventBatch]] = []
+            self._pending: list[EventBatch] = []
+
+        def add_events(self, batch):
+            self._pending.append(batch)
+            super().add_events(batch)
+
+        def process_frame(self, frame):
+            self.batches.append((frame.stamp_ns, EventBatch.concatenate(self._pending)))
+            self._pending = []
+            return super().process_frame(frame)
+
+    cfg = load_config("synthetic")
+    runs = []
+    for raw in (False, True):
+        pipe, outputs = _run(bag, cfg, factory=Recording, raw_events=raw)
+        runs.append(pipe._odometry.batches)
+        assert pipe.counters["event_msgs"] > 100 and pipe.decoder_stats["dropped_messages"] == 0
+    (a, b) = runs
+    assert len(a) == len(b) >= 15
+    total = 0
+    for (sa, ea), (sb, eb) in zip(a, b):
+        assert sa == sb and np.array_equal(ea.t, eb.t) and np.array_equal(ea.x, eb.x)
+        assert len(ea) == 0 or ea.t_last_ns <= sa  # nothing from after the frame
+        total += len(ea)
+    assert total > 10_000

@@ -140,10 +140,9 @@ def camera_from_info(msg: Any):
 
 def stamp_ns(msg: Any) -> int:
     """Header stamp in int64 nanoseconds (ROS 2 ``sec/nanosec`` or ROS 1 ``secs/nsecs``)."""
-    st = msg.header.stamp
-    if hasattr(st, "nanosec"):
-        return int(st.sec) * 1_000_000_000 + int(st.nanosec)
-    return int(st.secs if hasattr(st, "secs") else st.sec) * 1_000_000_000 + int(getattr(st, "nsecs", 0))
+    from atsvo_ros.io.ros_out import time_to_ns
+
+    return time_to_ns(msg.header.stamp)
 
 
 __all__ = ["COLOUR_ENCODINGS", "DEPTH_ENCODINGS", "ENCODINGS", "camera_from_info", "colour_from_msg",

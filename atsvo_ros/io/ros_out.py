@@ -52,7 +52,7 @@ def time_to_ns(stamp: Any) -> int:
     """int64 ns from a ROS 2 Time (sec/nanosec) or ROS 1 time (secs/nsecs)."""
     if hasattr(stamp, "nanosec"):
         return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-    return int(stamp.secs) * 1_000_000_000 + int(stamp.nsecs)
+    return int(getattr(stamp, "secs", getattr(stamp, "sec", 0))) * 1_000_000_000 + int(getattr(stamp, "nsecs", 0))
 
 
 def body_twist(T_odom_base_prev: np.ndarray, T_odom_base: np.ndarray, dt_s: float) -> np.ndarray:

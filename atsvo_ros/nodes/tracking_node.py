@@ -71,7 +71,8 @@ class TrackingNode(Node):
         self.create_subscription(CameraInfo, topics.rgb_info, self.pipeline.on_rgb_camera_info, qos)
         self.create_subscription(CameraInfo, topics.event_info, self.pipeline.on_event_camera_info, qos)
         if self.config.mode == "fused":
-            self.create_subscription(_msg_class(self.event_msgtype), topics.events, self._on_events, qos)
+            # raw=True: the callback gets the CDR bytes, decoded with numpy (no object per event).
+            self.create_subscription(_msg_class(self.event_msgtype), topics.events, self._on_events, qos, raw=True)
         rgb_sub = message_filters.Subscriber(self, Image, topics.rgb, qos_profile=qos)
         depth_sub = message_filters.Subscriber(self, Image, topics.depth, qos_profile=qos)
         self.sync = message_filters.ApproximateTimeSynchronizer(
@@ -84,7 +85,7 @@ class TrackingNode(Node):
     def _log(self, level: str, text: str) -> None:
         getattr(self.get_logger(), level)(text)
 
-    def _on_events(self, msg: Any) -> None:
+    def _on_events(self, msg: bytes) -> None:
         self.pipeline.on_events(msg, self.event_msgtype)
 
     def _on_rgbd(self, rgb: Image, depth: Image) -> None:
