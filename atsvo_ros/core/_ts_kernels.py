@@ -92,39 +92,81 @@ def _ats_update(t_last: np.ndarray, rec: np.ndarray, x: np.ndarray, y: np.ndarra
 
 @njit(cache=True)
 def _ring_sums(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, row: int, w: int, t_ns: int,
-               t_min: int, idx: np.ndarray, s_out: np.ndarray, k_out: np.ndarray) -> int:
-    """For the pixels of row .. row + w - 1 that fired at or after ``t_min``, returned as the first entries of
-    ``idx`` (their count returned): sum of the ages (clamped at 0) of their n latest active ring neighbours
-    (exact in int64; equals a float sum of the ages while they stay below 2**53 ns) and how many there are.
-    A pass of its own, so that the scattered loads of many pixels overlap and Eq. 1 runs over these only."""
+               t_min: int, buf: np.ndarray) -> int:
+    """For the pixels of row .. row + w - 1 that fired at or after ``t_min`` (their count returned), in order:
+    ``buf[0]`` their x, ``buf[1]`` their age (ns, clamped at 0), ``buf[2]`` the sum of the ages (clamped at 0)
+    of their n latest active ring neighbours (exact in int64; equals a float sum of the ages while they stay
+    below 2**53 ns) and ``buf[3]`` how many there are. A pass of its own, so that the scattered loads of many
+    pixels overlap and Eq. 1 runs over these only, vectorised (:func:`_eq1`)."""
     m = off.shape[0]
-    c = 0
+    c = np.uint64(0)
     for xx in range(w):
-        p = row + xx
-        if t_last[np.uint64(p)] < t_min:
+        p = np.uint64(row + xx)
+        tl = t_last[p]
+        if tl < t_min:
             continue
         k = 0
         s = np.int64(0)
         if n == m:  # every active ring neighbour counts: no need for the list
             for j in range(m):
-                v = t_last[np.uint64(p + off[j])]
+                v = t_last[p + np.uint64(off[j])]
                 if v != NEVER:
                     k += 1
                     s += max(t_ns - v, 0)
         else:
-            lst = rec[np.uint64(p)]
+            lst = rec[p]
             while k < n:  # members first, then placeholders (never fired)
-                v = t_last[np.uint64(p + off[lst & 15])]
+                v = t_last[p + np.uint64(off[lst & 15])]
                 if v == NEVER:
                     break
                 s += max(t_ns - v, 0)
                 lst >>= 4
                 k += 1
-        idx[c] = xx
-        s_out[c] = s
-        k_out[c] = k
-        c += 1
-    return c
+        buf[0, c] = xx
+        buf[1, c] = max(t_ns - tl, 0)
+        buf[2, c] = s
+        buf[3, c] = k
+        c += np.uint64(1)
+    return int(c)
+
+
+_LOG2E = 1.4426950408889634
+_LN2_HI = 6.93145751953125e-1  # ln 2 split in two (Cody-Waite): q * _LN2_HI is exact for |q| < 2**11
+_LN2_LO = 1.42860682030941723212e-6
+_X_MAX = 87.0  # exp(-87) * 255 is still a normal float32; beyond, Eq. 1 gives 0
+
+
+@njit(cache=True, error_model="numpy")
+def _eq1(c: int, buf: np.ndarray, tau_l_s: float, tau_u_s: float, mode: int, cutoff_age_s: float, keep_old: bool,
+         val: np.ndarray, tau_row: np.ndarray, scale_bits: np.ndarray) -> None:
+    """Eq. 1-2 for the ``c`` pixels listed in ``buf`` (see :func:`_ring_sums`): ``tau_row`` gets tau and the
+    value is ``val * scale`` with ``scale`` the float64 whose bits are ``scale_bits`` (a power of two).
+
+    Branch-free, so that it vectorises: ``exp(-x) = 2**-q exp(-r)`` with ``q = round(x / ln 2)``,
+    ``|r| <= ln(2) / 2`` and a degree-10 Taylor polynomial for ``exp(-r)`` (relative error < 1e-12, far
+    below float32 resolution); ``2**-q`` is assembled in the exponent bits. ``error_model="numpy"``: no
+    ZeroDivisionError checks (tau > 0, k clamped to >= 1). Pixels older than ``cutoff_age_s`` give 0
+    unless ``keep_old``.
+    """
+    for i in range(c):
+        k = buf[3, i]
+        mean_age = float(buf[2, i]) * 1e-9 / max(k, 1)
+        if mode == 0:
+            tau = min(max(mean_age, tau_l_s), tau_u_s)
+        else:
+            tau = max(tau_u_s - mean_age, tau_l_s)
+        tau = tau if k > 0 else tau_u_s
+        tau_row[i] = tau
+        age_s = float(buf[1, i]) * 1e-9
+        x = age_s / tau
+        keep = x <= _X_MAX and (keep_old or age_s <= cutoff_age_s)
+        x = min(x, _X_MAX)
+        q = math.floor(x * _LOG2E + 0.5)
+        r = (q * _LN2_HI - x) + q * _LN2_LO  # = -(x - q ln 2)
+        e = 1.0 + r * (1.0 + r * (1 / 2 + r * (1 / 6 + r * (1 / 24 + r * (1 / 120 + r * (
+            1 / 720 + r * (1 / 5040 + r * (1 / 40320 + r * (1 / 362880 + r * (1 / 3628800))))))))))
+        scale_bits[i] = (1023 - np.int64(q)) << 52
+        val[i] = 255.0 * e if keep else 0.0
 
 
 @njit(cache=True)
@@ -134,37 +176,36 @@ def _ats_render(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, w:
     """Eq. 1 with the per-pixel tau of Eq. 2 (mode 0: clip(mean age); mode 1: printed max(tau_u - age, tau_l)).
 
     The mean age runs over the active entries of p's recency list (see :func:`_ats_update`), read from the
-    padded flat ``t_last`` one row at a time (:func:`_ring_sums`). Pixels that never fired are 0 (tau NaN);
-    pixels older than ``cutoff_age_s`` (where even tau_u leaves < 0.5 grey levels) are 0 without evaluating
-    tau unless ``want_tau``.
+    padded flat ``t_last`` one row at a time (:func:`_ring_sums`), then Eq. 1 over the listed pixels at once
+    (:func:`_eq1`). Pixels that never fired are 0 (tau NaN); pixels older than ``cutoff_age_s`` (where even
+    tau_u leaves < 0.5 grey levels) are 0 without evaluating tau unless ``want_tau``.
     """
-    idx = np.empty(w, np.int64)
-    s_row = np.empty(w, np.int64)
-    k_row = np.empty(w, np.int64)
+    buf = np.empty((4, w), np.int64)
+    val = np.empty(w, np.float64)
+    tau_row = np.empty(w, np.float64)
+    scale_bits = np.empty(w, np.int64)
+    scale = scale_bits.view(np.float64)
     # every pixel that fired if want_tau, else those within the cutoff (with 1 ms to spare for rounding)
     t_min = NEVER + 1 if want_tau else t_ns - int(math.ceil(cutoff_age_s * 1e9)) - 1_000_000
-    out[:] = 0.0
-    if want_tau:
-        tau_out[:] = np.nan
     for yy in range(h):
-        row = (yy + pad) * wp + pad
-        for i in range(_ring_sums(t_last, rec, off, n, row, w, t_ns, t_min, idx, s_row, k_row)):
-            xx = idx[i]
-            age_s = max(t_ns - t_last[np.uint64(row + xx)], 0) * 1e-9
-            if age_s > cutoff_age_s and not want_tau:
-                continue
-            k = k_row[i]
-            if k == 0:
-                tau = tau_u_s
+        c = _ring_sums(t_last, rec, off, n, (yy + pad) * wp + pad, w, t_ns, t_min, buf)
+        _eq1(c, buf, tau_l_s, tau_u_s, mode, cutoff_age_s, want_tau, val, tau_row, scale_bits)
+        o = out[yy]
+        if c == w:  # every pixel listed, in order
+            for i in range(w):
+                o[i] = val[i] * scale[i]
+        else:
+            o[:] = 0.0
+            for i in range(c):
+                o[buf[0, i]] = val[i] * scale[i]
+        if want_tau:
+            to = tau_out[yy]
+            if c == w:
+                to[:] = tau_row
             else:
-                mean_age = float(s_row[i]) * 1e-9 / k
-                if mode == 0:
-                    tau = min(max(mean_age, tau_l_s), tau_u_s)
-                else:
-                    tau = max(tau_u_s - mean_age, tau_l_s)
-            if want_tau:
-                tau_out[yy, xx] = tau
-            out[yy, xx] = 255.0 * np.exp(-age_s / tau)
+                to[:] = np.nan
+                for i in range(c):
+                    to[buf[0, i]] = tau_row[i]
 
 
 @njit(cache=True)
