@@ -189,6 +189,13 @@ class AdaptiveTimeSurface(TimeSurface):
         self._run(t_ns, False)
         return self._out.copy()
 
+    def render(self, t_ns: int | None = None) -> np.ndarray:
+        c = self.cfg
+        if c.blur_ksize == 1 and c.median_ksize == 1:
+            return self.render_raw(t_ns)
+        self._run(t_ns, False)
+        return _postfilter(self._out, c.blur_ksize, c.median_ksize)  # OpenCV writes a new image: no copy needed
+
     def tau_map(self, t_ns: int | None = None) -> np.ndarray:
         """Per-pixel decay time constant in seconds at ``t_ns`` (NaN where no event arrived yet)."""
         self._run(t_ns, True)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -77,6 +78,40 @@ def test_ats_matches_per_pixel_reference_on_random_events(mode, n_latest):
         # render skips pixels so old that even tau_u leaves < 0.5 grey levels
         np.testing.assert_allclose(ats.render_raw(t_q), ref_img, atol=0.5, rtol=1e-5)
     assert ats.n_events == len(b) and ats.n_skipped == 0
+
+
+@pytest.mark.parametrize("mode", ["mean_age", "eq2_printed"])
+def test_ats_eq1_is_exact_to_float32_over_the_whole_decay(mode):
+    """The render evaluates exp with its own (vectorisable) polynomial: against math.exp it must stay at float32
+    precision wherever Eq. 1 is evaluated -- ages from 0 to past the cutoff, age / tau from 0 to far beyond the
+    float32 range (tau_l small) -- and give exactly 0 beyond the cutoff; dense and sparse rows both."""
+    w, h = 64, 40
+    cfg = AtsConfig(tau_u_s=0.03, tau_l_s=0.0004, n_latest=4, tau_mode=mode, **RAW)
+    rng = np.random.default_rng(11)
+    n = 6000
+    x, y = rng.integers(0, w, n), rng.integers(0, h - 8, n)
+    y[: n // 2] = np.minimum(y[: n // 2], h // 2)  # upper half dense, lower rows sparse
+    t = rng.integers(0, 300_000_000, n)  # spans beyond the cutoff (0.03 s * ln 510 = 0.187 s)
+    # two pixels of the bottom rows with age / tau >> 87: one whose ring fires just before the query
+    # (tau = tau_l in mean_age mode), one whose ring fired long before it (tau = tau_l in eq2_printed mode)
+    for cx, t_centre, t_ring in ((10, 150_000_000, 299_900_000), (40, 200_000_000, 100_000_000)):
+        x = np.concatenate([x, [cx], [cx + dx for dx, _ in FAST16]])
+        y = np.concatenate([y, [h - 4], [h - 4 + dy for _, dy in FAST16]])
+        t = np.concatenate([t, [t_centre], np.full(16, t_ring)])
+    order = np.argsort(t, kind="stable")
+    b = EventBatch(x[order], y[order], t[order], np.zeros(len(t)), w, h)
+    ats = AdaptiveTimeSurface(w, h, cfg)
+    ats.update(b)
+    t_q = 300_000_000
+    ref_img, ref_tau = _reference_ats(b, w, h, t_q, cfg)
+    img = ats.render_raw(t_q)
+    age_s = np.where(ats.active_mask(), (t_q - ats.t_last) * 1e-9, np.inf)
+    inside = age_s <= cfg.tau_u_s * math.log(2 * 255.0)
+    assert inside.sum() > 500 and (~inside & ats.active_mask()).sum() > 100
+    assert (age_s / np.nan_to_num(ref_tau, nan=1.0))[inside].max() > 100.0  # exp underflows float32 there
+    np.testing.assert_allclose(img[inside], ref_img[inside], rtol=1e-6, atol=1e-30)
+    assert np.all(img[~inside] == 0.0)
+    np.testing.assert_allclose(ats.tau_map(t_q), ref_tau, rtol=1e-6, equal_nan=True)
 
 
 def test_ats_with_duplicate_timestamps_matches_reference():
@@ -257,6 +292,8 @@ def test_common_interface_and_smoothing(kind):
     assert 0.0 <= float(img.min()) and float(img.max()) <= 255.0
     raw = surf.render_raw()
     assert float(np.abs(np.diff(img, axis=1)).mean()) < float(np.abs(np.diff(raw, axis=1)).mean())
+    np.testing.assert_array_equal(img, cv2.medianBlur(cv2.blur(raw, (3, 3)), 3))  # box blur, then median blur
+    assert not np.shares_memory(img, surf.render())  # every render is a new image
     surf.reset()
     assert float(surf.render(int(b.t[-1])).max()) == 0.0
 
