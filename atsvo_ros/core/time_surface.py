@@ -38,10 +38,15 @@ pixel as before. For time-ordered events the result is exactly that of keeping t
 and the clamping of ages at the query time included). State lives on the surface padded by the ring radius,
 so ring neighbours need no bounds checks. Measured on one (shared) core: 25-30 M events/s for any n (was
 ~10 M/s at n = 4, ~2 M/s at n = 16). Render: per row, one scalar pass lists the pixels within the decay
-cutoff with their ring age sums (the scattered loads), then Eq. 1 runs over the list branch-free and
-vectorised (exp from a polynomial, no libm call). Including the blurs: ~0.23 ms at 320x240 on a real
-DVXplorer recording and ~0.48 ms at 346x260 on a real DAVIS346 one; ~0.6 / ~0.7 ms when every pixel fired
-within the decay window (was ~1.1 / ~1.25 ms), about two thirds of it the ring loads.
+cutoff with their ring age sums (the scattered loads: about two thirds of the time when every pixel is
+active), then Eq. 1 runs over the list branch-free and vectorised (exp from a polynomial, the power of two
+built in the exponent bits: no libm call). Including the blurs, best median on one shared core: ~0.22 ms at
+320x240 on a real DVXplorer recording, ~0.47 ms at 346x260 on a real DAVIS346 one, ~0.57 / ~0.68 ms at
+320x240 / 346x260 when every pixel fired within the decay window (was ~0.27, ~0.73, ~1.08, ~1.27 ms). The
+ring pass is sensitive to where the allocator put the arrays relative to each other: in some processes
+(e.g. ``atsvo-bench events``, after its decoding part) the DAVIS346 render takes ~0.7 ms. Rows split over
+two threads (numba prange) take half the time on an idle machine, but when the other core is busy the
+render waits for a descheduled thread (p90 ~8 ms), so it stays single-threaded.
 """
 from __future__ import annotations
 
