@@ -141,10 +141,43 @@ class TrackResult:
     converged: bool
     guess_index: int
     states: dict[str, np.ndarray]
+    singular: bool = False  # LM met a singular system on some level (degenerate geometry or no texture)
 
     @property
     def ok(self) -> bool:
         return bool(np.all(np.isfinite(self.T_rgb_w)) and np.all(np.isfinite(self.covariance)))
+
+
+@dataclass
+class _System:
+    """Normal equations of all blocks at one level and one estimate (what LM compares and solves)."""
+
+    H: np.ndarray
+    g: np.ndarray
+    energy: float
+    n_inliers: int
+    n_visible: int
+    n_residuals: int
+    sse: float
+    affine_blocks: list[ResidualBlock]
+
+    @property
+    def energy_per_point(self) -> float:
+        return self.energy / max(self.n_visible, 1)
+
+
+@dataclass
+class _LevelResult:
+    """Outcome of LM on one pyramid level."""
+
+    T: np.ndarray
+    affine: dict[str, tuple[float, float]]
+    system: _System
+    iterations: int
+    converged: bool
+    singular: bool
+    fresh: bool  # the blocks' point states belong to ``T`` (no rejected step after the last accepted one)
+    threshold: float
 
 
 class Tracker:
@@ -154,10 +187,10 @@ class Tracker:
         self.config = config
 
     def _system(self, blocks: list[ResidualBlock], level: int, T: np.ndarray,
-                affine: dict[str, tuple[float, float]], thr: float):
+                affine: dict[str, tuple[float, float]], thr: float) -> _System:
         cfg = self.config
-        n_aff = [b for b in blocks if b.estimate_affine and level < b.n_levels]
-        dim = 6 + 2 * len(n_aff)
+        aff_blocks = [b for b in blocks if b.estimate_affine and level < b.n_levels]
+        dim = 6 + 2 * len(aff_blocks)
         H = np.zeros((dim, dim))
         g = np.zeros(dim)
         energy = 0.0
@@ -171,7 +204,7 @@ class Tracker:
             H[:6, :6] += Hb[:6, :6]
             g[:6] += gb[:6]
             if blk.estimate_affine:
-                k = 6 + 2 * n_aff.index(blk)
+                k = 6 + 2 * aff_blocks.index(blk)
                 H[:6, k:k + 2] += Hb[:6, 6:]
                 H[k:k + 2, :6] += Hb[6:, :6]
                 H[k:k + 2, k:k + 2] += Hb[6:, 6:]
@@ -184,46 +217,43 @@ class Tracker:
         # Weak prior keeps the brightness parameters well posed when few points are visible.
         for i in range(6, dim):
             H[i, i] += 1e-3 * max(1, n_in)
-        return H, g, energy, n_in, n_vis, n_res, sse, n_aff
+        return _System(H, g, float(energy), int(n_in), int(n_vis), int(n_res), float(sse), aff_blocks)
 
-    def _optimise_level(self, blocks, level, T, affine, first=None):
+    def _optimise_level(self, blocks: list[ResidualBlock], level: int, T: np.ndarray,
+                        affine: dict[str, tuple[float, float]], first: _System | None = None) -> _LevelResult:
         """LM at one level. The outlier threshold is relaxed (x2, up to x4) while most visible points
         are outliers (a poor initial guess); convergence is an update below ``convergence_eps``
-        scaled by the level's pixel size."""
+        scaled by the level's pixel size, or a stalling energy."""
         cfg = self.config
         thr = cfg.outlier_threshold
-        sysm = first if first is not None else self._system(blocks, level, T, affine, thr)
+        cur = first if first is not None else self._system(blocks, level, T, affine, thr)
         for _ in range(2):
-            if sysm[4] == 0 or sysm[3] >= 0.5 * sysm[4]:
+            if cur.n_visible == 0 or cur.n_inliers >= 0.5 * cur.n_visible:
                 break
             thr *= 2.0
-            sysm = self._system(blocks, level, T, affine, thr)
-        H, g, E, n_in, n_vis, n_res, sse, aff_blocks = sysm
+            cur = self._system(blocks, level, T, affine, thr)
         eps = cfg.convergence_eps * (2.0 ** level)
         lam = 1e-4
-        iters = 0
-        rejected = 0
-        converged = False
-        fresh = True  # the blocks' point states belong to the current estimate
+        iters = rejected = 0
+        converged = singular = False
+        fresh = True
         for _ in range(cfg.max_iterations):
             iters += 1
-            if n_in < 6:
+            if cur.n_inliers < 6:
                 break
-            try:
-                delta, T_new = kernels._lm_step(H, g, lam, T)
-            except Exception:  # singular system (numba raises a plain exception)
-                break
-            if not np.all(np.isfinite(delta)):
+            delta, T_new = kernels._lm_step(cur.H, cur.g, float(lam), np.ascontiguousarray(T))
+            if not np.all(np.isfinite(delta)):  # singular damped system: reported, never hidden
+                singular = True
                 break
             aff_new = dict(affine)
-            for j, blk in enumerate(aff_blocks):
+            for j, blk in enumerate(cur.affine_blocks):
                 a, b = affine[blk.name]
                 aff_new[blk.name] = (a + delta[6 + 2 * j], b + delta[7 + 2 * j])
-            Hn, gn, En, ni, nv, nr, sn, _ = self._system(blocks, level, T_new, aff_new, thr)
+            new = self._system(blocks, level, T_new, aff_new, thr)
             small = float(np.sqrt(delta[:6] @ delta[:6])) < eps
-            if nv > 0 and En / nv < E / max(n_vis, 1):
-                gain = 1.0 - (En / nv) / max(E / max(n_vis, 1), 1e-12)
-                T, affine, H, g, E, n_in, n_vis, n_res, sse = T_new, aff_new, Hn, gn, En, ni, nv, nr, sn
+            if new.n_visible > 0 and new.energy_per_point < cur.energy_per_point:
+                gain = 1.0 - new.energy_per_point / max(cur.energy_per_point, 1e-12)
+                T, affine, cur = T_new, aff_new, new
                 fresh = True
                 rejected = 0
                 lam = max(lam * 0.25, 1e-7)
@@ -236,9 +266,9 @@ class Tracker:
                 lam *= 8.0
                 # Near the minimum, noise and points crossing the border make tiny steps fail: stop.
                 if small or rejected >= 3:
-                    converged = small or rejected >= 3 and iters > 3
+                    converged = small or iters > 3
                     break
-        return T, affine, H, g, E, n_in, n_vis, n_res, sse, iters, converged, fresh, thr
+        return _LevelResult(T, affine, cur, iters, converged, singular, fresh, thr)
 
     def track(self, blocks: list[ResidualBlock], guesses: list[np.ndarray],
               affine: dict[str, tuple[float, float]] | None = None) -> TrackResult:
@@ -253,39 +283,38 @@ class Tracker:
         if not blocks or not guesses:
             raise TrackingError("tracking needs at least one residual block and one initial guess")
         affine = {b.name: (affine or {}).get(b.name, (0.0, 0.0)) for b in blocks}
-        n_levels = max(b.n_levels for b in blocks)
-        top = n_levels - 1
+        top = max(b.n_levels for b in blocks) - 1
         # Evaluate every guess at the coarsest level; energy per visible point (outliers pay a
         # constant) picks the guess that explains the image best, which is then optimised.
-        best, best_e, best_sys = None, np.inf, None
+        best, best_sys = None, None
         for gi, T0 in enumerate(guesses):
             T0 = np.asarray(T0, dtype=np.float64)
             if not np.all(np.isfinite(T0)):
                 continue
             sysm = self._system(blocks, top, T0, affine, self.config.outlier_threshold)
-            if sysm[4] > 0 and sysm[2] / sysm[4] < best_e:
-                best, best_e, best_sys = gi, sysm[2] / sysm[4], sysm
+            if sysm.n_visible > 0 and (best_sys is None or sysm.energy_per_point < best_sys.energy_per_point):
+                best, best_sys = gi, sysm
         if best is None:
             raise TrackingError("no initial guess sees any map point (or every guess contains NaN)")
-        gi = best
-        if len(guesses) > 1 and gi != len(guesses) - 1:
+        if best != len(guesses) - 1:
             best_sys = None  # the blocks' point states belong to the last guess evaluated
-        out = self._optimise_level(blocks, top, np.asarray(guesses[gi], dtype=np.float64), dict(affine), best_sys)
-        total_iters = out[9]
-        fresh = False
+        out = self._optimise_level(blocks, top, np.asarray(guesses[best], dtype=np.float64), dict(affine), best_sys)
+        total_iters = out.iterations
+        singular = out.singular
         for level in range(top - 1, -1, -1):
-            out = self._optimise_level(blocks, level, out[0], out[1])
-            total_iters += out[9]
-            fresh = out[11]
-        T, aff, H, g, E, n_in, n_vis, n_res, sse, _, conv, _, thr = out
-        if not fresh or top == 0:
-            # Point states and H must belong to the final estimate (a rejected step overwrote them).
-            H, g, E, n_in, n_vis, n_res, sse, _ = self._system(blocks, 0, T, aff, thr)
-        cov = self._covariance(H, n_res, sse)
+            out = self._optimise_level(blocks, level, out.T, out.affine)
+            total_iters += out.iterations
+            singular |= out.singular
+        final = out.system
+        if not out.fresh or top == 0 or out.threshold != self.config.outlier_threshold:
+            # Point states and H must belong to the final estimate (a rejected step overwrote them), and
+            # inliers are judged at the nominal threshold: the relaxed one only helps a poor guess converge.
+            final = self._system(blocks, 0, out.T, out.affine, self.config.outlier_threshold)
+        cov = self._covariance(final.H, final.n_residuals, final.sse) * self.config.covariance_scale
         states = {b.name: b.state.copy() for b in blocks}
         n_points = sum(len(b.points_w) for b in blocks)
-        return TrackResult(T, aff, cov, float(E), int(n_in), int(n_vis), int(n_points), int(total_iters),
-                           bool(conv), int(gi), states)
+        return TrackResult(out.T, out.affine, cov, final.energy, final.n_inliers, final.n_visible, int(n_points),
+                           int(total_iters), bool(out.converged), int(best), states, bool(singular))
 
     @staticmethod
     def _covariance(H: np.ndarray, n_res: int, sse: float) -> np.ndarray:

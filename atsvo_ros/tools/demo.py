@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import sys
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -126,8 +127,26 @@ def _main(args: argparse.Namespace) -> int:
     print(format_table(rows))
     for note in sorted({n for r in rows for n in r["notes"] if n.startswith("RGB-D only")}):
         print(f"note: {note}")
+    for r in rows:
+        for note in r["notes"]:
+            if note.startswith("warning: "):
+                print(f"atsvo-demo: {r['mode']}: {note}", file=sys.stderr)
     print(f"\ntrajectories, metrics.json and plots in {out}/<mode>/")
+    if args.max_ate_cm is not None:
+        return check_accuracy(rows, args.max_ate_cm)
     return 0
+
+
+def check_accuracy(rows: list[dict[str, Any]], max_ate_cm: float) -> int:
+    """Exit code 1 (with one line per failing mode) when a mode has no metrics or an ATE above the limit."""
+    failed = 0
+    for r in rows:
+        ate = (r.get("metrics") or {}).get("ate_rmse_m")
+        if ate is None or not ate * 100.0 <= max_ate_cm:
+            got = "no metrics" if ate is None else f"ATE {ate * 100.0:.2f} cm"
+            print(f"atsvo-demo: check failed: mode {r['mode']}: {got} (limit {max_ate_cm:g} cm)", file=sys.stderr)
+            failed = 1
+    return failed
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -145,6 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--height", type=int, help="colour image height (default 480)")
     parser.add_argument("--event-scale", type=float, help="event sensor scale (default 1; smaller is faster)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--max-ate-cm", type=float, metavar="CM",
+                        help="exit with code 1 if any mode's ATE RMSE exceeds this (a smoke test of the install)")
     return parser
 
 

@@ -1,6 +1,7 @@
-"""``atsvo-info``: load a configuration and print the rig it describes (cameras, extrinsics, topics).
+"""``atsvo-info``: the environment (library versions, numba kernel cache) and the rig a configuration describes.
 
-Useful to check a parameter file before a run: every value is validated exactly as the nodes do.
+Useful to check a parameter file before a run (every value is validated exactly as the nodes do) and to see
+why a run is slow: kernels missing from numba's cache compile on first use.
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 from atsvo_ros.config import flatten, load_config
 from atsvo_ros.core.geometry import rotation_angle_rad
 from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
+from atsvo_ros.tools._environment import describe
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -20,6 +22,8 @@ def _main(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(flatten(cfg), indent=2))
         return 0
+    print("\n".join(describe()))
+    print()
     for name in ("rgb_camera", "event_camera"):
         cam = getattr(cfg, name).model()
         hfov = np.degrees(2 * np.arctan(cam.width / (2 * cam.fx)))

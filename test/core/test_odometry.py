@@ -112,6 +112,43 @@ def test_loss_reinitialises_without_jump_or_nan(room, config):
     assert np.all(np.isfinite(nxt.T_odom_base)) and np.all(np.isfinite(nxt.covariance))
 
 
+def _second_frame_loss(room, overrides, second):
+    """Track a keyframe at the origin, then ``second(T_w_c1)``'s frame; return (result, odometry)."""
+    odo = Odometry(load_config("synthetic", overrides=overrides), CAM)
+    odo.process_frame(_frame(room, CAM, np.eye(4), 0, ss=1))
+    T_w_c1 = se3_exp(np.array([0.01, 0.0, 0.01, 0.0, 0.005, 0.0]))
+    return odo.process_frame(second(T_w_c1)), odo
+
+
+@pytest.mark.parametrize("case, overrides, reason", [
+    ("other_scene", {}, "inliers"),
+    ("degenerate", {"tracker.max_position_std_m": 1e-7}, "degenerate geometry"),
+    ("darker", {}, "brightness gain jumped"),
+    ("jump", {"tracker.max_step_m": 0.004}, "jump of"),
+])
+def test_each_loss_rule_fires_on_its_own(room, case, overrides, reason):
+    """Inliers, degenerate geometry, gain jump, step jump: each rule alone makes a frame lost (then re-initialised)."""
+    def second(T):
+        fr = _frame(room, CAM, T, 33 * MS, ss=1)
+        if case == "other_scene":  # same geometry, pixel noise instead of the texture: nothing matches
+            noise = np.random.default_rng(0).integers(0, 256, fr.rgb.shape[:2], dtype=np.uint8)
+            return RgbdFrame(fr.stamp_ns, np.repeat(noise[..., None], 3, axis=2), fr.depth_m)
+        if case == "darker":  # auto-exposure cannot change the gain by 3x in one frame
+            return RgbdFrame(fr.stamp_ns, (fr.rgb * 0.33).astype(np.uint8), fr.depth_m)
+        return fr
+
+    res, odo = _second_frame_loss(room, overrides, second)
+    assert odo.last_loss_reason is not None and reason in odo.last_loss_reason, odo.last_loss_reason
+    assert res.status is TrackingStatus.REINITIALISED and res.keyframe_inserted
+    # the published pose is the motion-model prediction (the first frame's, here): no jump, no NaN
+    assert np.allclose(res.T_odom_base, np.eye(4)) and np.all(res.covariance == np.eye(6) * 1e3)
+
+
+def test_no_loss_rule_fires_on_a_good_frame(room):
+    res, odo = _second_frame_loss(room, {}, lambda T: _frame(room, CAM, T, 33 * MS, ss=1))
+    assert res.status is TrackingStatus.OK and odo.last_loss_reason is None
+
+
 def test_initialising_until_depth_arrives(room, config):
     odo = Odometry(config, CAM)
     img, depth = room.render(CAM, np.eye(4), supersample=1)
@@ -164,6 +201,7 @@ def test_short_synthetic_trot_is_accurate():
     gt = Trajectory(stamps, sim.T_world_base(stamps))
     # The odom frame is the base at the first frame: no alignment needed to compare.
     gt_odom = se3_inv(gt.T_w_b[0]) @ gt.T_w_b
-    assert np.max(np.linalg.norm(np.asarray(poses)[:, :3, 3] - gt_odom[:, :3, 3], axis=1)) < 0.03
+    # measured: max error 0.70 cm, ATE 0.33 cm, RPE 0.025 deg/f; limits at ~3x
+    assert np.max(np.linalg.norm(np.asarray(poses)[:, :3, 3] - gt_odom[:, :3, 3], axis=1)) < 0.02
     m = evaluate(gt, Trajectory(stamps, np.asarray(poses))).metrics
-    assert m["ate_rmse_m"] < 0.02 and m["rpe_rot_deg_per_frame"] < 0.3 and not m["diverged"], m
+    assert m["ate_rmse_m"] < 0.01 and m["rpe_rot_deg_per_frame"] < 0.075 and not m["diverged"], m

@@ -77,5 +77,7 @@ def test_demo_end_to_end_with_the_real_simulator_and_odometry(tmp_path, capsys):
     for mode in demo_mod.pipeline_modes():
         doc = json.loads((tmp_path / "out" / mode / "metrics.json").read_text())
         assert doc["n_matched"] >= 15
+        # measured ATE 1.1 cm at 160x120 (17 cm when the tracker does not optimise); limit ~3x
+        assert doc["ate_rmse_m"] < 0.03 and not doc["diverged"], doc
         line = next(ln for ln in text.splitlines() if ln.startswith(mode))
         assert f"{doc['ate_rmse_m'] * 100:.2f}" in line

@@ -185,3 +185,25 @@ def test_two_ros1_bags_are_merged(tmp_path, fake):
     two = (tmp_path / "o2" / "trajectory.tum").read_text().splitlines()[1:]
     assert one == two and len(one) == 8
     assert (tmp_path / "o1" / "metrics.json").read_text() == (tmp_path / "o2" / "metrics.json").read_text()
+
+
+def test_slow_tracking_is_warned_about(tmp_path, fake):
+    """Tracking far slower than its benchmark (numba recompiling, a fallback path) is said, not hidden."""
+    assert replay_mod.slow_tracking_warning(np.full(50, 0.004), 640, 480, "rgbd") is None
+    assert replay_mod.slow_tracking_warning(np.full(50, 0.025), 640, 480, "rgbd") is None  # slow machine: fine
+    text = replay_mod.slow_tracking_warning(np.r_[np.full(3, 5.0), np.full(50, 0.110)], 640, 480, "rgbd")
+    assert text is not None and "110 ms" in text and "atsvo-info" in text
+    # a quarter of the pixels: a quarter of the budget (floored at 2 ms)
+    assert replay_mod.slow_tracking_warning(np.full(50, 0.010), 320, 240, "rgbd") is not None
+
+    class Slow(fake):
+        def process_frame(self, frame):
+            import dataclasses
+
+            return dataclasses.replace(super().process_frame(frame), tracking_time_s=0.2)
+
+    bag = write_bag(tmp_path / "bag", "mcap", n_frames=12)
+    res = replay(bag, tmp_path / "out", load_config("synthetic"), odometry_factory=Slow, plots=False, progress=False)
+    assert any(n.startswith("warning: tracking takes 200 ms") for n in res.notes), res.notes
+    timing = json.loads((tmp_path / "out" / "timing.json").read_text())
+    assert any("200 ms" in n for n in timing["notes"])

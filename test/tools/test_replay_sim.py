@@ -47,8 +47,8 @@ def test_containers_give_identical_trajectories(sim_runs):
 def test_replay_tracks_the_synthetic_sequence(sim_runs):
     _, out, res = sim_runs["mcap"]
     doc = json.loads((out / "metrics.json").read_text())
-    # a short, slow trot at 160x120: the RGB-D odometry must follow it (not a tuned accuracy bound)
-    assert doc["diverged"] is False and doc["ate_rmse_m"] < 0.2
+    # a short trot at 160x120; measured ATE 1.2 cm (27 cm when the tracker does not optimise); limit ~3x
+    assert doc["diverged"] is False and doc["ate_rmse_m"] < 0.035
     assert doc["n_matched"] == len(res.stamps_ns)
     timing = json.loads((out / "timing.json").read_text())
     assert timing["n_frames"] == len(res.stamps_ns) and timing["sync"]["dropped_rgb"] == 0
