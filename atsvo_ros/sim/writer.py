@@ -9,6 +9,8 @@ numpy by :mod:`atsvo_ros.io.encode` (never one Python object per event).
 from __future__ import annotations
 
 import dataclasses
+import shutil
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -185,31 +187,45 @@ class _BagSink:
         self.writer.write(self.conns[topic], int(t_ns), data)
 
 
-def _prepare_out(out: Path, fmt: str, force: bool) -> Path:
-    """Create ``out``; return the bag path (the directory itself for ROS 2, ``out/sequence.bag`` for ROS 1)."""
-    ours = ("metadata.yaml", "sequence.bag", "groundtruth.tum", "sequence.yaml")
+_OURS = ("metadata.yaml", "sequence.bag", "groundtruth.tum", "sequence.yaml")
+
+
+def _ours(p: Path) -> bool:
+    return p.name in _OURS or p.suffix in (".mcap", ".db3") or p.name.endswith((".db3-shm", ".db3-wal"))
+
+
+def _check_out(out: Path, force: bool) -> None:
+    """Refuse an ``out`` that is a file, holds files atsvo-sim did not write, or (without ``force``) anything."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise SimulationError(f"output {out} exists and is not a directory")
+    entries = list(out.iterdir())
+    if entries and not force:
+        raise SimulationError(f"output directory {out} is not empty (use --force to replace a sequence)")
+    for p in entries:
+        if not _ours(p):
+            raise SimulationError(f"{out} holds {p.name}, which atsvo-sim did not write; choose another --out")
+
+
+def _move_into_place(done: Path, out: Path) -> None:
+    """Replace ``out`` (a previous atsvo-sim output, or nothing) by the complete output ``done``."""
     if out.exists():
-        if not out.is_dir():
-            raise SimulationError(f"output {out} exists and is not a directory")
-        entries = list(out.iterdir())
-        if entries and not force:
-            raise SimulationError(f"output directory {out} is not empty (use --force to replace a sequence)")
-        for p in entries:
-            if p.name in ours or p.suffix in (".mcap", ".db3") or p.name.endswith((".db3-shm", ".db3-wal")):
-                p.unlink()
-            else:
-                raise SimulationError(f"{out} holds {p.name}, which atsvo-sim did not write; choose another --out")
+        _check_out(out, force=True)  # again: it may have changed during the generation
+        for p in out.iterdir():
+            p.unlink()
         out.rmdir()
-    if fmt == "ros1":
-        out.mkdir(parents=True)
-        return out / "sequence.bag"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return out
+    done.rename(out)
 
 
 def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event_msg: str = "packet",
                    encoding: str = "libcaer_cmp", force: bool = False, progress: bool = True) -> dict[str, Any]:
-    """Generate ``spec`` into ``out`` (bag + ``groundtruth.tum`` + ``sequence.yaml``); return a summary."""
+    """Generate ``spec`` into ``out`` (bag + ``groundtruth.tum`` + ``sequence.yaml``); return a summary.
+
+    Everything is written to a hidden temporary folder next to ``out`` and moved into place when
+    complete; on any failure (or Ctrl-C) the folder is removed, so ``out`` holds either the
+    previous output (``force``) or nothing, and a rerun works.
+    """
     if fmt not in FORMATS:
         raise SimulationError(f"unknown format {fmt!r} (choose one of {', '.join(FORMATS)})")
     if event_msg not in EVENT_MSGS:
@@ -218,11 +234,41 @@ def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event
         raise SimulationError(f"event encoding {encoding!r} is not supported here "
                               f"(choose one of {', '.join(EVENT_ENCODINGS)})")
     out = Path(out)
+    if out.name in ("", ".", ".."):
+        raise SimulationError(f"--out {out} must name the sequence's own folder")
+    _check_out(out, force)
+    created = [p for p in (out.parent, *out.parent.parents) if not p.exists()]  # deepest first
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.atsvo-sim-partial-", dir=out.parent))
+    done = False
+    try:
+        target = staging / out.name  # same folder name: a ROS 2 bag names its storage file after it
+        summary = _generate(spec, target, fmt, event_msg, encoding, progress,
+                            out / "sequence.bag" if fmt == "ros1" else out)
+        _move_into_place(target, out)
+        done = True
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        for p in created if not done else ():  # parent folders made for this run, if still empty
+            try:
+                p.rmdir()
+            except OSError:
+                break
+    return summary
+
+
+def _generate(spec: SequenceSpec, out: Path, fmt: str, event_msg: str, encoding: str, progress: bool,
+              final_bag: Path) -> dict[str, Any]:
+    """Write the bag, ``groundtruth.tum`` and ``sequence.yaml`` into the new folder ``out``."""
     rig = sequence_rig(spec)
     topics = layout_topics(rig, spec.layout, event_msg, imu=spec.imu)
     ros_version = 1 if fmt == "ros1" else 2
     msgs = _Messages(ros_version)
-    bag_path = _prepare_out(out, fmt, force)
+    if fmt == "ros1":
+        out.mkdir()
+        bag_path = out / "sequence.bag"
+    else:
+        bag_path = out  # rosbags creates the ROS 2 bag directory
     counts = {"frames": 0, "event_packets": 0, "events": 0, "poses": 0, "imu_samples": 0}
     stats: dict[str, Any] = {}
     gt_stamps, gt_poses = [], []
@@ -281,7 +327,7 @@ def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event
               header=f"atsvo-sim {spec.scenario} seed {spec.seed}: T_world_{rig.config.topics.base_frame}")
     summary = {**counts, "event_renders": int(stats.get("event_renders", 0)),
                "rgb_renders": int(stats.get("rgb_renders", 0)), "wall_s": round(wall, 2),
-               "bag": str(bag_path)}
+               "bag": str(final_bag)}
     _write_description(out / "sequence.yaml", spec, rig, topics, fmt, event_msg, encoding, summary,
                        stats.get("imu"))
     return summary

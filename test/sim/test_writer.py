@@ -214,3 +214,58 @@ def test_other_packet_encodings_round_trip(tmp_path, encoding):
     np.testing.assert_array_equal(decoded.y, events.y)
     with pytest.raises(SimulationError, match="evt3"):
         write_sequence(spec, tmp_path / "e", encoding="evt3", progress=False)
+
+
+def _fail_late(monkeypatch, where: str) -> None:
+    """Make the generation fail after the bag is written (``description``) or in the middle of it (``stream``)."""
+    import atsvo_ros.sim.writer as writer
+
+    def boom(*_a, **_k):
+        raise SimulationError("injected failure")
+
+    if where == "description":
+        monkeypatch.setattr(writer, "_write_description", boom)
+    else:
+        real = writer.iter_sequence
+
+        def failing(*a, **k):
+            for i, item in enumerate(real(*a, **k)):
+                if i == 40:
+                    boom()
+                yield item
+
+        monkeypatch.setattr(writer, "iter_sequence", failing)
+
+
+@pytest.mark.parametrize("fmt, where", [("mcap", "description"), ("ros1", "stream"), ("sqlite3", "stream")])
+def test_a_late_failure_leaves_nothing_and_a_rerun_works(tmp_path, monkeypatch, fmt, where):
+    spec = SequenceSpec(scenario="trot", duration_s=0.2, seed=0, **TINY)
+    out = tmp_path / "new" / "seq"
+    with monkeypatch.context() as m:
+        _fail_late(m, where)
+        with pytest.raises(SimulationError, match="injected"):
+            write_sequence(spec, out, fmt=fmt, progress=False)
+    assert list(tmp_path.iterdir()) == []  # no partial bag, no temporary folder, no parent made for it
+    summary = write_sequence(spec, out, fmt=fmt, progress=False)  # no --force needed
+    assert sorted(p.name for p in out.parent.iterdir()) == ["seq"]
+    assert (out / "sequence.yaml").is_file() and summary["bag"] == str(out / "sequence.bag" if fmt == "ros1"
+                                                                          else out)
+    types, _ = _read(out, fmt)
+    assert types == ROBOT_TOPICS
+
+
+def test_a_failed_forced_rerun_keeps_the_previous_output(tmp_path, monkeypatch):
+    spec = SequenceSpec(scenario="trot", duration_s=0.1, seed=0, **TINY)
+    out = tmp_path / "seq"
+    write_sequence(spec, out, progress=False)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert "seq.mcap" in before  # the storage file is named after the final folder, not the temporary one
+    with monkeypatch.context() as m:
+        _fail_late(m, "description")
+        with pytest.raises(SimulationError, match="injected"):
+            write_sequence(dataclasses.replace(spec, seed=1), out, force=True, progress=False)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seq"]
+    monkeypatch.chdir(out)
+    with pytest.raises(SimulationError, match="own folder"):
+        write_sequence(spec, ".", force=True, progress=False)  # would have to replace the working folder
