@@ -57,6 +57,8 @@ class RigConfig:
 
     T_base_rgb: tuple[float, ...] = _f(_IDENTITY16, doc="colour optical frame in the robot base frame")
     T_rgb_event: tuple[float, ...] = _f(_IDENTITY16, doc="event camera frame in the colour optical frame")
+    T_rgb_imu: tuple[float, ...] = _f(_IDENTITY16, doc="IMU frame (of the imu topic's samples) in the colour "
+                                                       "optical frame")
     depth_scale_m: float = _f(0.001, 0.0, 10.0, lo_open=True, doc="metres per 16UC1 depth unit")
     depth_min_m: float = _f(0.3, 0.0, 100.0)
     depth_max_m: float = _f(6.0, 0.0, 1000.0, lo_open=True)
@@ -67,6 +69,9 @@ class RigConfig:
 
     def T_rgb_event_matrix(self) -> np.ndarray:
         return np.asarray(self.T_rgb_event, dtype=np.float64).reshape(4, 4)
+
+    def T_rgb_imu_matrix(self) -> np.ndarray:
+        return np.asarray(self.T_rgb_imu, dtype=np.float64).reshape(4, 4)
 
 
 @dataclass(frozen=True)
@@ -79,6 +84,7 @@ class TopicsConfig:
     events: str = "/dvxplorer/events"
     event_info: str = "/dvxplorer/camera_info"
     ground_truth: str = "/ground_truth/pose"
+    imu: str = "/camera/camera/imu"  # sensor_msgs/Imu (realsense2_camera with unite_imu_method set)
     odometry: str = "/atsvo/odometry"
     odom_frame: str = "odom"
     base_frame: str = "base_link"
@@ -295,7 +301,7 @@ def _check_cross_fields(obj: Any, prefix: str) -> None:
         from atsvo_ros.core.geometry import check_pose
         from atsvo_ros.errors import GeometryError
 
-        for name in ("T_base_rgb", "T_rgb_event"):
+        for name in ("T_base_rgb", "T_rgb_event", "T_rgb_imu"):
             try:
                 check_pose(np.asarray(getattr(obj, name)).reshape(4, 4), tol=1e-4)
             except GeometryError as exc:

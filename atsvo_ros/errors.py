@@ -25,6 +25,10 @@ class DecodeError(AtsvoError):
     """An event message or file could not be decoded (unknown encoding, truncated buffer, ...)."""
 
 
+class ImuError(AtsvoError, ValueError):
+    """IMU samples are inconsistent (array shapes, unsorted stamps) or do not cover a requested interval."""
+
+
 class ImageError(AtsvoError):
     """An image message has an unsupported encoding or inconsistent size."""
 

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -14,6 +15,18 @@ def test_bundled_presets_load(name):
     cfg = load_config(name)
     assert isinstance(cfg, AtsvoConfig)
     assert cfg.event_camera.model().width in (320, 346)
+
+
+def test_imu_topic_and_extrinsic_defaults_and_presets():
+    default = AtsvoConfig()
+    assert default.topics.imu == "/camera/camera/imu" and default.rig.T_rgb_imu_matrix().tolist() == np.eye(4).tolist()
+    # mini_cheetah and synthetic: one D455's IMU about 6 cm from the colour imager (ORB-SLAM3's calibration).
+    for name in ("mini_cheetah", "synthetic"):
+        T = load_config(name).rig.T_rgb_imu_matrix()
+        assert load_config(name).topics.imu == "/camera/camera/imu"
+        assert 0.05 < np.linalg.norm(T[:3, 3]) < 0.06 and np.allclose(T[:3, :3], np.eye(3), atol=0.01)
+    assert load_config("mvsec").topics.imu == "/davis/left/imu"
+    assert np.linalg.norm(load_config("mvsec").rig.T_rgb_imu_matrix()[:3, 3]) < 0.02
 
 
 def test_presets_are_the_files_in_config_dir():
@@ -37,6 +50,7 @@ def test_dotted_and_nested_keys_agree_and_round_trip():
     ({"rig.depth_min_m": 7.0}, ["rig.depth_min_m", "7.0", "depth_max_m"]),
     ({"rig.T_base_rgb": [1, 2, 3]}, ["rig.T_base_rgb", "16"]),
     ({"rig.T_rgb_event": [2.0] + [0.0] * 15}, ["rig.T_rgb_event", "rigid"]),
+    ({"rig.T_rgb_imu": [0.0] * 16}, ["rig.T_rgb_imu", "rigid"]),
     ({"tracker.huber_delta": "big"}, ["tracker.huber_delta", "big", "type"]),
     ({"mapping.min_healthy_regions": 10}, ["mapping.min_healthy_regions", "10", "[1, 9]"]),
     ({"ats.nonsense": 1}, ["ats.nonsense", "unknown"]),

@@ -20,12 +20,13 @@ import numpy as np
 from atsvo_ros.errors import AtsvoError, BagError
 
 #: roles the replay understands, in the order they are reported
-ROLES = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth", "tf_static")
+ROLES = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth", "tf_static", "imu")
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 INFO_TYPES = ("sensor_msgs/msg/CameraInfo",)
 POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
               "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry")
 TF_TYPES = ("tf2_msgs/msg/TFMessage",)
+IMU_TYPES = ("sensor_msgs/msg/Imu",)
 PRESETS = ("mini_cheetah", "mvsec", "synthetic")
 
 
@@ -40,6 +41,7 @@ class TopicSelection:
     event_info: str | None = None
     ground_truth: str | None = None
     tf_static: str | None = None
+    imu: str | None = None
 
     def items(self) -> list[tuple[str, str]]:
         return [(f.name, getattr(self, f.name)) for f in fields(self) if getattr(self, f.name)]
@@ -133,7 +135,7 @@ def preset_topics(name: str) -> dict[str, str]:
     from atsvo_ros.config import load_config
 
     t = load_config(name).topics
-    return {r: getattr(t, r) for r in ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")}
+    return {r: getattr(t, r) for r in ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth", "imu")}
 
 
 def _detect(role: str, topics: dict[str, str], chosen: dict[str, str | None]) -> str | None:
@@ -165,6 +167,10 @@ def _detect(role: str, topics: dict[str, str], chosen: dict[str, str | None]) ->
         return only(cands) or only([t for t in cands if any(k in t.lower() for k in ("ground_truth", "gt", "pose"))])
     if role == "tf_static":
         return "/tf_static" if topics.get("/tf_static") in TF_TYPES else None
+    if role == "imu":
+        # realsense2_camera's gyro/sample and accel/sample carry one sensor each: only a united topic will do.
+        cands = [t for t, m in topics.items() if m in IMU_TYPES and not t.endswith(("/gyro/sample", "/accel/sample"))]
+        return only(cands) or only([t for t in cands if t.rsplit("/", 1)[-1] == "imu"])
     return None
 
 
@@ -418,5 +424,5 @@ class StaticTf:
         return None
 
 
-__all__ = ["PRESETS", "ROLES", "Bag", "BagMessage", "StaticTf", "TopicSelection", "open_any_reader",
+__all__ = ["IMU_TYPES", "PRESETS", "ROLES", "Bag", "BagMessage", "StaticTf", "TopicSelection", "open_any_reader",
            "pose_from_msg", "preset_topics", "resolve_topics"]

@@ -10,9 +10,11 @@ stream to a bag. Streams, merged by stamp:
 * events as :class:`EventBatch` packets of ``event_packet_s``, yielded when the packet is complete
   (merge key = packet end). The event camera is rendered at an adaptive rate: the next render time
   is chosen so that no scene point moves more than ``EventModel.max_step_px`` between renders
-  (measured by re-projecting a grid of the last render's 3-D points with the pose change).
+  (measured by re-projecting a grid of the last render's 3-D points with the pose change);
+* IMU samples (layout robot, ``imu=True``) as one-sample :class:`ImuBatch` items at their stamps:
+  the D455's BMI055 in the IMU frame ``T_rgb_imu`` of the config (:mod:`atsvo_ros.sim.imu`).
 
-The rig comes from a config preset: cameras, ``T_base_rgb``, ``T_rgb_event``. Physically the
+The rig comes from a config preset: cameras, ``T_base_rgb``, ``T_rgb_event``, ``T_rgb_imu``. Physically the
 camera is mounted on the body as in ``config/synthetic.yaml``; the ground truth is reported for
 the config's base frame (for MVSEC, base = camera), so camera = ``T_world_base @ T_base_rgb``.
 """
@@ -28,9 +30,11 @@ from atsvo_ros.config import AtsvoConfig, load_config
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError
 from atsvo_ros.sim.events import EventModel, EventSensor
-from atsvo_ros.sim.motion import SCENARIOS, Motion, make_motion
+from atsvo_ros.sim.imu import ImuModel, ImuSensor
+from atsvo_ros.sim.motion import GRAVITY, SCENARIOS, Motion, make_motion
 from atsvo_ros.sim.render import Renderer
 from atsvo_ros.sim.rgbd import ColorSensor, DepthModel, RgbModel, depth_to_mm
 from atsvo_ros.sim.scene import Scene, make_scene
@@ -60,6 +64,8 @@ class SequenceSpec:
     rgb_model: RgbModel = field(default_factory=RgbModel)
     depth_model: DepthModel = field(default_factory=DepthModel)
     event_model: EventModel = field(default_factory=EventModel)
+    imu: bool = True  # simulate the colour camera's IMU (layout robot only; MVSEC's DAVIS IMU is not modelled)
+    imu_model: ImuModel = field(default_factory=ImuModel)
 
     def __post_init__(self) -> None:
         if self.scenario not in SCENARIOS:
@@ -116,6 +122,7 @@ class SimRig:
     T_base_rgb: np.ndarray
     T_rgb_event: np.ndarray
     T_body_rgb: np.ndarray  # physical mount of the colour camera on the robot body
+    T_rgb_imu: np.ndarray = field(default_factory=lambda: np.eye(4))  # IMU frame in the colour optical frame
 
     @property
     def T_base_event(self) -> np.ndarray:
@@ -142,7 +149,8 @@ def sequence_rig(spec: SequenceSpec) -> SimRig:
     if spec.layout == "robot" and rgb.is_distorted:
         raise SimulationError("layout robot needs an undistorted colour camera (depth is aligned to it)")
     mount = load_config("synthetic").rig.T_base_rgb_matrix()
-    return SimRig(cfg, rgb, depth_cam, ev, cfg.rig.T_base_rgb_matrix(), cfg.rig.T_rgb_event_matrix(), mount)
+    return SimRig(cfg, rgb, depth_cam, ev, cfg.rig.T_base_rgb_matrix(), cfg.rig.T_rgb_event_matrix(), mount,
+                  cfg.rig.T_rgb_imu_matrix())
 
 
 class Simulation:
@@ -154,8 +162,9 @@ class Simulation:
         self.scene = scene or make_scene(spec.seed, spec.texture_size)
         self.motion: Motion = make_motion(spec.scenario, spec.duration_s, spec.seed, self.scene.free_xy,
                                           t0_ns=spec.start_ns)
-        rngs = [np.random.default_rng(s) for s in np.random.SeedSequence([spec.seed, 0x5E9]).spawn(4)]
-        self._rng_rgb, self._rng_depth, self._rng_events, _ = rngs
+        seeds = np.random.SeedSequence([spec.seed, 0x5E9]).spawn(4)
+        self._rng_rgb, self._rng_depth, self._rng_events = (np.random.default_rng(s) for s in seeds[:3])
+        self._imu_seed = seeds[3]
         dm = spec.depth_model
         self.depth_model = replace(dm, min_m=self.rig.config.rig.depth_min_m, max_m=self.rig.config.rig.depth_max_m)
         # Camera pose in the world = body pose x physical mount; ground truth for the config's base.
@@ -168,6 +177,9 @@ class Simulation:
 
     def T_world_event(self, t_ns) -> np.ndarray:
         return self.T_world_rgb(t_ns) @ self.rig.T_rgb_event
+
+    def T_world_imu(self, t_ns) -> np.ndarray:
+        return self.T_world_rgb(t_ns) @ self.rig.T_rgb_imu
 
     def T_world_base(self, t_ns) -> np.ndarray:
         """Ground truth: pose of the config's base frame."""
@@ -200,6 +212,27 @@ class Simulation:
             chunk = stamps[i0:i0 + 256]
             for s, T in zip(chunk, self.T_world_base(chunk)):
                 yield GroundTruth(int(s), T)
+
+    @property
+    def has_imu(self) -> bool:
+        return self.spec.imu and self.spec.layout == "robot"
+
+    def imu_sensor(self) -> ImuSensor:
+        """A fresh IMU of this sequence (same seed, so the same samples every time)."""
+        return ImuSensor(self.spec.imu_model, self.T_world_imu, self.t_start_ns, self.t_end_ns,
+                         np.random.SeedSequence(self._imu_seed.entropy, spawn_key=self._imu_seed.spawn_key),
+                         GRAVITY)
+
+    def imu(self, stats: dict | None = None) -> Iterator[ImuBatch]:
+        """IMU samples one at a time (empty without an IMU); ``stats['imu']`` describes the seed's draws."""
+        if not self.has_imu:
+            return
+        sensor = self.imu_sensor()
+        if stats is not None:
+            stats["imu"] = sensor.describe()
+        for chunk in sensor.batches():
+            for i in range(len(chunk)):
+                yield chunk.select(slice(i, i + 1))
 
     def frames(self, stats: dict | None = None) -> Iterator[RgbdFrame]:
         """RGB-D frames at ``rate_hz`` (``stats['rgb_renders']`` counts the rendered sub-frames)."""
@@ -331,11 +364,12 @@ class _MotionProbe:
 
 
 def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
-                  stats: dict | None = None) -> Iterator[RgbdFrame | EventBatch | GroundTruth]:
-    """Generate a sequence: ground truth, RGB-D frames and event packets merged in time order.
+                  stats: dict | None = None) -> Iterator[RgbdFrame | EventBatch | GroundTruth | ImuBatch]:
+    """Generate a sequence: ground truth, RGB-D frames, event packets and IMU samples merged in time order.
 
-    Event packets are keyed by their end (they are complete then); frames and poses by their stamp.
-    ``stats`` (optional dict) receives counters ``event_renders`` and ``rgb_renders``.
+    Event packets are keyed by their end (they are complete then); frames, poses and IMU samples by
+    their stamp. ``stats`` (optional dict) receives counters ``event_renders`` and ``rgb_renders``
+    and the IMU's per-seed draws ``imu``.
     """
     sim = Simulation(spec, scene)
     packet_ns = int(round(spec.event_packet_s * 1e9))
@@ -351,7 +385,8 @@ def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
 
     streams = [keyed(sim.ground_truth(), 0, lambda g: g.stamp_ns),
                keyed(sim.frames(stats), 1, lambda f: f.stamp_ns),
-               keyed(sim.events(stats), 2, event_key)]
+               keyed(sim.events(stats), 2, event_key),
+               keyed(sim.imu(stats), 3, lambda b: b.t_first_ns)]
     for _, _, item in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
         yield item
 
@@ -361,5 +396,5 @@ def make_simulation(spec: SequenceSpec, scene: Scene | None = None) -> Simulatio
     return Simulation(spec, scene)
 
 
-__all__ = ["GroundTruth", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation", "iter_sequence", "make_motion",
-           "make_scene", "make_simulation", "sequence_rig"]
+__all__ = ["GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation", "iter_sequence",
+           "make_motion", "make_scene", "make_simulation", "sequence_rig"]

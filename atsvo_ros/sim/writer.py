@@ -1,13 +1,16 @@
 """Write a synthetic sequence as a ROS 2 bag (mcap / sqlite3) or a ROS 1 bag, plus TUM ground truth.
 
 Layout ``robot`` uses the robot's drivers' topics and types (realsense2_camera, libcaer_driver,
-motion capture); layout ``mvsec`` those of MVSEC's indoor_flying bags. Messages are built with
+motion capture), including the D455's united IMU topic; layout ``mvsec`` those of MVSEC's
+indoor_flying bags. Messages are built with
 rosbags' classes from :func:`atsvo_ros.io.msgtypes.typestore`; event messages are serialized with
 numpy by :mod:`atsvo_ros.io.encode` (never one Python object per event).
 """
 from __future__ import annotations
 
 import dataclasses
+import shutil
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -19,6 +22,7 @@ import yaml
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.geometry import quat_from_rotmat
+from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError
 from atsvo_ros.io.encode import ENCODINGS, serialize_dvs_event_array, serialize_event_packet
 from atsvo_ros.io.msgtypes import typestore
@@ -31,6 +35,7 @@ EVENT_MSGS = ("packet", "dvs")
 EVENT_ENCODINGS = tuple(e for e in ENCODINGS if e != "evt3")
 RGB_FRAME = "camera_color_optical_frame"
 EVENT_FRAME = "dvxplorer"
+IMU_FRAME = "camera_imu_optical_frame"  # realsense2_camera's frame of the united imu topic
 WORLD_FRAME = "world"
 
 
@@ -45,10 +50,11 @@ class BagTopics:
     event_info: tuple[str, str] | None
     ground_truth: tuple[str, str]
     tf_static: tuple[str, str] | None
+    imu: tuple[str, str] | None = None
 
 
-def layout_topics(rig: SimRig, layout: str, event_msg: str = "packet") -> BagTopics:
-    """Topics and types for ``layout`` (names from the rig's config ``topics`` section)."""
+def layout_topics(rig: SimRig, layout: str, event_msg: str = "packet", imu: bool = True) -> BagTopics:
+    """Topics and types for ``layout`` (names from the rig's config ``topics`` section); ``imu`` for robot."""
     t = rig.config.topics
     img, info, pose = "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo", "geometry_msgs/msg/PoseStamped"
     if layout == "mvsec":
@@ -56,7 +62,8 @@ def layout_topics(rig: SimRig, layout: str, event_msg: str = "packet") -> BagTop
                          None, (t.ground_truth, pose), None)
     ev_type = "event_camera_msgs/msg/EventPacket" if event_msg == "packet" else "dvs_msgs/msg/EventArray"
     return BagTopics((t.rgb, img), (t.rgb_info, info), (t.depth, img), (t.events, ev_type),
-                     (t.event_info, info), (t.ground_truth, pose), ("/tf_static", "tf2_msgs/msg/TFMessage"))
+                     (t.event_info, info), (t.ground_truth, pose), ("/tf_static", "tf2_msgs/msg/TFMessage"),
+                     (t.imu, "sensor_msgs/msg/Imu") if imu else None)
 
 
 class _Messages:
@@ -115,6 +122,20 @@ class _Messages:
         pose = self.T["geometry_msgs/msg/Pose"](position=point, orientation=quat)
         return self.T["geometry_msgs/msg/PoseStamped"](header=self.header(stamp_ns, frame_id), pose=pose)
 
+    def imu(self, stamp_ns: int, frame_id: str, gyro: np.ndarray, accel: np.ndarray, gyro_var: float,
+            accel_var: float) -> Any:
+        """sensor_msgs/Imu without orientation (covariance[0] = -1, REP 145), diagonal noise covariances."""
+        V3 = self.T["geometry_msgs/msg/Vector3"]
+        q0 = self.T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=0.0)  # as realsense2_camera
+        no_orientation = np.zeros(9)
+        no_orientation[0] = -1.0
+        return self.T["sensor_msgs/msg/Imu"](
+            header=self.header(stamp_ns, frame_id), orientation=q0, orientation_covariance=no_orientation,
+            angular_velocity=V3(x=float(gyro[0]), y=float(gyro[1]), z=float(gyro[2])),
+            angular_velocity_covariance=np.eye(3).reshape(-1) * gyro_var,
+            linear_acceleration=V3(x=float(accel[0]), y=float(accel[1]), z=float(accel[2])),
+            linear_acceleration_covariance=np.eye(3).reshape(-1) * accel_var)
+
     def tf(self, stamp_ns: int, links: list[tuple[str, str, np.ndarray]]) -> Any:
         out = []
         for parent, child, T in links:
@@ -166,31 +187,45 @@ class _BagSink:
         self.writer.write(self.conns[topic], int(t_ns), data)
 
 
-def _prepare_out(out: Path, fmt: str, force: bool) -> Path:
-    """Create ``out``; return the bag path (the directory itself for ROS 2, ``out/sequence.bag`` for ROS 1)."""
-    ours = ("metadata.yaml", "sequence.bag", "groundtruth.tum", "sequence.yaml")
+_OURS = ("metadata.yaml", "sequence.bag", "groundtruth.tum", "sequence.yaml")
+
+
+def _ours(p: Path) -> bool:
+    return p.name in _OURS or p.suffix in (".mcap", ".db3") or p.name.endswith((".db3-shm", ".db3-wal"))
+
+
+def _check_out(out: Path, force: bool) -> None:
+    """Refuse an ``out`` that is a file, holds files atsvo-sim did not write, or (without ``force``) anything."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise SimulationError(f"output {out} exists and is not a directory")
+    entries = list(out.iterdir())
+    if entries and not force:
+        raise SimulationError(f"output directory {out} is not empty (use --force to replace a sequence)")
+    for p in entries:
+        if not _ours(p):
+            raise SimulationError(f"{out} holds {p.name}, which atsvo-sim did not write; choose another --out")
+
+
+def _move_into_place(done: Path, out: Path) -> None:
+    """Replace ``out`` (a previous atsvo-sim output, or nothing) by the complete output ``done``."""
     if out.exists():
-        if not out.is_dir():
-            raise SimulationError(f"output {out} exists and is not a directory")
-        entries = list(out.iterdir())
-        if entries and not force:
-            raise SimulationError(f"output directory {out} is not empty (use --force to replace a sequence)")
-        for p in entries:
-            if p.name in ours or p.suffix in (".mcap", ".db3") or p.name.endswith((".db3-shm", ".db3-wal")):
-                p.unlink()
-            else:
-                raise SimulationError(f"{out} holds {p.name}, which atsvo-sim did not write; choose another --out")
+        _check_out(out, force=True)  # again: it may have changed during the generation
+        for p in out.iterdir():
+            p.unlink()
         out.rmdir()
-    if fmt == "ros1":
-        out.mkdir(parents=True)
-        return out / "sequence.bag"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return out
+    done.rename(out)
 
 
 def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event_msg: str = "packet",
                    encoding: str = "libcaer_cmp", force: bool = False, progress: bool = True) -> dict[str, Any]:
-    """Generate ``spec`` into ``out`` (bag + ``groundtruth.tum`` + ``sequence.yaml``); return a summary."""
+    """Generate ``spec`` into ``out`` (bag + ``groundtruth.tum`` + ``sequence.yaml``); return a summary.
+
+    Everything is written to a hidden temporary folder next to ``out`` and moved into place when
+    complete; on any failure (or Ctrl-C) the folder is removed, so ``out`` holds either the
+    previous output (``force``) or nothing, and a rerun works.
+    """
     if fmt not in FORMATS:
         raise SimulationError(f"unknown format {fmt!r} (choose one of {', '.join(FORMATS)})")
     if event_msg not in EVENT_MSGS:
@@ -199,12 +234,42 @@ def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event
         raise SimulationError(f"event encoding {encoding!r} is not supported here "
                               f"(choose one of {', '.join(EVENT_ENCODINGS)})")
     out = Path(out)
+    if out.name in ("", ".", ".."):
+        raise SimulationError(f"--out {out} must name the sequence's own folder")
+    _check_out(out, force)
+    created = [p for p in (out.parent, *out.parent.parents) if not p.exists()]  # deepest first
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.atsvo-sim-partial-", dir=out.parent))
+    done = False
+    try:
+        target = staging / out.name  # same folder name: a ROS 2 bag names its storage file after it
+        summary = _generate(spec, target, fmt, event_msg, encoding, progress,
+                            out / "sequence.bag" if fmt == "ros1" else out)
+        _move_into_place(target, out)
+        done = True
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        for p in created if not done else ():  # parent folders made for this run, if still empty
+            try:
+                p.rmdir()
+            except OSError:
+                break
+    return summary
+
+
+def _generate(spec: SequenceSpec, out: Path, fmt: str, event_msg: str, encoding: str, progress: bool,
+              final_bag: Path) -> dict[str, Any]:
+    """Write the bag, ``groundtruth.tum`` and ``sequence.yaml`` into the new folder ``out``."""
     rig = sequence_rig(spec)
-    topics = layout_topics(rig, spec.layout, event_msg)
+    topics = layout_topics(rig, spec.layout, event_msg, imu=spec.imu)
     ros_version = 1 if fmt == "ros1" else 2
     msgs = _Messages(ros_version)
-    bag_path = _prepare_out(out, fmt, force)
-    counts = {"frames": 0, "event_packets": 0, "events": 0, "poses": 0}
+    if fmt == "ros1":
+        out.mkdir()
+        bag_path = out / "sequence.bag"
+    else:
+        bag_path = out  # rosbags creates the ROS 2 bag directory
+    counts = {"frames": 0, "event_packets": 0, "events": 0, "poses": 0, "imu_samples": 0}
     stats: dict[str, Any] = {}
     gt_stamps, gt_poses = [], []
     mvsec = spec.layout == "mvsec"
@@ -212,17 +277,21 @@ def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event
     bar = _progress(spec.duration_s, progress)
     t_start = spec.start_ns
     with _BagSink(bag_path, fmt) as sink:
-        for name in ("rgb", "rgb_info", "depth", "events", "event_info", "ground_truth", "tf_static"):
+        for name in ("rgb", "rgb_info", "depth", "events", "event_info", "ground_truth", "tf_static", "imu"):
             tt = getattr(topics, name)
             if tt is not None:
                 sink.add(tt[0], tt[1], msgs.store, latching=name == "tf_static")
         if topics.tf_static is not None:
             links = [(rig.config.topics.base_frame, RGB_FRAME, rig.T_base_rgb),
                      (RGB_FRAME, EVENT_FRAME, rig.T_rgb_event)]
+            if topics.imu is not None:
+                links.append((RGB_FRAME, IMU_FRAME, rig.T_rgb_imu))
             sink.write(topics.tf_static[0], t_start, msgs.serialize(msgs.tf(t_start, links), topics.tf_static[1]))
         rgb_frame = RGB_FRAME if not mvsec else "davis_left"
         ev_frame = EVENT_FRAME if not mvsec else "davis_left"
         seq = 0
+        gyro_var = spec.imu_model.white_sigma("gyro") ** 2
+        accel_var = spec.imu_model.white_sigma("accel") ** 2
         for item in iter_sequence(spec, stats=stats):
             if isinstance(item, GroundTruth):
                 gt_stamps.append(item.stamp_ns)
@@ -247,14 +316,20 @@ def write_sequence(spec: SequenceSpec, out: str | Path, fmt: str = "mcap", event
                 seq += 1
                 counts["event_packets"] += 1
                 counts["events"] += len(item)
+            elif isinstance(item, ImuBatch) and topics.imu is not None:
+                for s, g, a in zip(item.stamps_ns.tolist(), item.gyro_rad_s, item.accel_m_s2):
+                    m = msgs.imu(s, IMU_FRAME, g, a, gyro_var, accel_var)
+                    sink.write(topics.imu[0], s, msgs.serialize(m, topics.imu[1]))
+                counts["imu_samples"] += len(item)
     bar.close()
     wall = time.perf_counter() - wall0
     write_tum(out / "groundtruth.tum", Trajectory(np.asarray(gt_stamps), np.asarray(gt_poses)),
               header=f"atsvo-sim {spec.scenario} seed {spec.seed}: T_world_{rig.config.topics.base_frame}")
     summary = {**counts, "event_renders": int(stats.get("event_renders", 0)),
                "rgb_renders": int(stats.get("rgb_renders", 0)), "wall_s": round(wall, 2),
-               "bag": str(bag_path)}
-    _write_description(out / "sequence.yaml", spec, rig, topics, fmt, event_msg, encoding, summary)
+               "bag": str(final_bag)}
+    _write_description(out / "sequence.yaml", spec, rig, topics, fmt, event_msg, encoding, summary,
+                       stats.get("imu"))
     return summary
 
 
@@ -275,7 +350,7 @@ def _write_frame(sink: _BagSink, msgs: _Messages, topics: BagTopics, rig: SimRig
 
 
 def _write_description(path: Path, spec: SequenceSpec, rig: SimRig, topics: BagTopics, fmt: str, event_msg: str,
-                       encoding: str, summary: dict[str, Any]) -> None:
+                       encoding: str, summary: dict[str, Any], imu_draws: dict[str, Any] | None = None) -> None:
     def plain(v: Any) -> Any:
         if isinstance(v, np.ndarray):
             return np.round(v, 9).tolist()
@@ -294,11 +369,13 @@ def _write_description(path: Path, spec: SequenceSpec, rig: SimRig, topics: BagT
         "gt_rate_hz": spec.gt_rate_hz, "event_packet_s": spec.event_packet_s,
         "rig": {"rgb_camera": rig.rgb_camera.to_dict(), "depth_camera": rig.depth_camera.to_dict(),
                 "event_camera": rig.event_camera.to_dict(), "T_base_rgb": plain(rig.T_base_rgb),
-                "T_rgb_event": plain(rig.T_rgb_event)},
+                "T_rgb_event": plain(rig.T_rgb_event), "T_rgb_imu": plain(rig.T_rgb_imu)},
         "topics": {k: list(v) for k, v in dataclasses.asdict(topics).items() if v is not None},
         "models": {"rgb": plain(dataclasses.asdict(spec.rgb_model)),
                    "depth": plain(dataclasses.asdict(spec.depth_model)),
-                   "events": plain(dataclasses.asdict(spec.event_model))},
+                   "events": plain(dataclasses.asdict(spec.event_model)),
+                   **({"imu": {**plain(spec.imu_model.to_dict()), "frame": IMU_FRAME, "this_seed": imu_draws}}
+                      if topics.imu is not None else {})},
         "ground_truth": "groundtruth.tum (T_world_base, TUM: t tx ty tz qx qy qz qw)",
         "summary": summary,
     }

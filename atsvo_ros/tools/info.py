@@ -29,7 +29,7 @@ def _main(args: argparse.Namespace) -> int:
         hfov = np.degrees(2 * np.arctan(cam.width / (2 * cam.fx)))
         print(f"{name:13s} {cam.width}x{cam.height}  fx={cam.fx:.2f} fy={cam.fy:.2f} "
               f"cx={cam.cx:.2f} cy={cam.cy:.2f}  {cam.distortion_model}  HFOV {hfov:.1f} deg")
-    for name in ("T_base_rgb", "T_rgb_event"):
+    for name in ("T_base_rgb", "T_rgb_event", "T_rgb_imu"):
         T = np.asarray(getattr(cfg.rig, name)).reshape(4, 4)
         print(f"{name:13s} t = {np.round(T[:3, 3], 4).tolist()} m, "
               f"rotation {np.degrees(rotation_angle_rad(T[:3, :3])):.2f} deg")

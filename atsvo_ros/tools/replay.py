@@ -107,7 +107,7 @@ def _cameras(cfg: AtsvoConfig, first: dict[str, Any], notes: list[str]):
 
 
 def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[str]) -> AtsvoConfig:
-    """T_base_rgb / T_rgb_event from /tf_static when it connects the frames, else the config."""
+    """T_base_rgb / T_rgb_event / T_rgb_imu from /tf_static when it connects the frames, else the config."""
     from atsvo_ros.io.bags import StaticTf
 
     if "tf_static" not in first:
@@ -128,6 +128,12 @@ def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[s
         if T is not None:
             updates["T_rgb_event"] = _flat(T)
             notes.append(f"T_rgb_event from /tf_static ({rgb_frame} -> {ev_frame})")
+    imu_frame = first["imu"].header.frame_id if "imu" in first else ""
+    if rgb_frame and imu_frame:
+        T = tf.lookup(rgb_frame, imu_frame)
+        if T is not None:
+            updates["T_rgb_imu"] = _flat(T)
+            notes.append(f"T_rgb_imu from /tf_static ({rgb_frame} -> {imu_frame})")
     return _with_rig(cfg, **updates) if updates else cfg
 
 
@@ -156,7 +162,7 @@ class _BagSource:
         return self.bag.duration_s
 
     def setup(self, config: AtsvoConfig, notes: list[str]):
-        first = self.bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events"])
+        first = self.bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events", "imu"])
         config = _extrinsics(config, self.bag, first, notes)
         return (config, *_cameras(config, first, notes))
 

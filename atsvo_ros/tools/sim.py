@@ -1,7 +1,8 @@
 """``atsvo-sim``: generate a synthetic legged-robot sequence (RGB-D, events, ground truth) as a bag.
 
 Example: ``atsvo-sim --scenario backflip --duration 10 --seed 1 --out out/backflip`` writes a ROS 2
-mcap bag directory with the robot's topics, ``groundtruth.tum`` and ``sequence.yaml``.
+mcap bag directory with the robot's topics (cameras, events, IMU, ground truth), ``groundtruth.tum``
+and ``sequence.yaml``.
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ def _main(args: argparse.Namespace) -> int:
     spec = SequenceSpec(scenario=args.scenario, duration_s=args.duration, seed=args.seed, layout=args.layout,
                         config=args.config, width=args.width, height=args.height, rate_hz=args.rate,
                         exposure_s=args.exposure, gt_rate_hz=args.gt_rate, event_packet_s=args.packet_ms * 1e-3,
-                        event_scale=args.event_scale, texture_size=args.texture_size)
+                        event_scale=args.event_scale, texture_size=args.texture_size, imu=not args.no_imu)
     if args.noise_rate is not None or args.contrast is not None:
         em = spec.event_model
         em = dataclasses.replace(em, noise_rate_hz=em.noise_rate_hz if args.noise_rate is None else args.noise_rate,
@@ -32,7 +33,7 @@ def _main(args: argparse.Namespace) -> int:
     print(f"{args.scenario} {args.duration:g} s seed {args.seed}: {summary['frames']} RGB-D frames, "
           f"{summary['events']} events in {summary['event_packets']} packets "
           f"({summary['event_renders']} event renders, {summary['rgb_renders']} colour sub-frames), "
-          f"{summary['poses']} poses; "
+          f"{summary['poses']} poses, {summary['imu_samples']} IMU samples; "
           f"{summary['wall_s']:.1f} s wall -> {summary['bag']}", file=sys.stderr)
     return 0
 
@@ -62,6 +63,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--texture-size", type=int, default=512, help="texture side in texels (power of two)")
     p.add_argument("--contrast", type=float, default=None, help="event contrast threshold C+ = C- (default 0.2)")
     p.add_argument("--noise-rate", type=float, default=None, help="background events per pixel per s (0.1)")
+    p.add_argument("--no-imu", action="store_true", help="layout robot: no IMU topic (default: the D455's "
+                   "BMI055 on /camera/camera/imu at ~200 Hz)")
     p.add_argument("--force", action="store_true", help="replace an existing atsvo-sim output in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return run(_main, p, argv)

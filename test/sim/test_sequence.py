@@ -9,6 +9,7 @@ import pytest
 
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.geometry import interpolate_trajectory, se3_inv
+from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError
 from atsvo_ros.sim.events import EventModel
 from atsvo_ros.sim.rgbd import DepthModel
@@ -18,10 +19,15 @@ from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, iter_se
 TINY = {"width": 64, "event_scale": 0.25, "texture_size": 32, "gt_rate_hz": 200.0}
 
 
-def _collect(spec: SequenceSpec, scene=None):
+def _collect(spec: SequenceSpec, scene=None, imu: list | None = None):
     frames, events, poses, order = [], [], [], []
     for item in iter_sequence(spec, scene):
-        if isinstance(item, RgbdFrame):
+        if isinstance(item, ImuBatch):
+            assert len(item) == 1
+            order.append(item.t_first_ns)
+            if imu is not None:
+                imu.append(item)
+        elif isinstance(item, RgbdFrame):
             frames.append(item)
             order.append(item.stamp_ns)
         elif isinstance(item, GroundTruth):
@@ -36,8 +42,13 @@ def _collect(spec: SequenceSpec, scene=None):
 
 def test_stream_is_time_ordered_with_expected_rates():
     spec = SequenceSpec(scenario="trot", duration_s=0.5, seed=1, **TINY)
-    frames, events, poses, order = _collect(spec)
+    imu: list[ImuBatch] = []
+    frames, events, poses, order = _collect(spec, imu=imu)
     assert len(frames) == 16 and len(poses) == 101
+    # IMU samples at ~200 Hz (the gyro's clock is a few percent off), inside the sequence.
+    imu_t = np.array([b.t_first_ns for b in imu])
+    assert 90 <= len(imu) <= 106 and np.all(np.diff(imu_t) > 0)
+    assert imu_t[0] >= spec.start_ns and imu_t[-1] <= spec.start_ns + 500_000_000
     assert np.all(np.diff(order) >= -1_000_000)  # event packets are keyed by their end (<= 1 ms)
     t = np.concatenate([b.t for b in events])
     assert np.all(np.diff(t) >= 0)
@@ -51,7 +62,11 @@ def test_stream_is_time_ordered_with_expected_rates():
 
 def test_sequences_are_deterministic_for_a_seed():
     spec = SequenceSpec(scenario="pronk", duration_s=0.3, seed=7, **TINY)
-    a, b = _collect(spec), _collect(spec)
+    imu_a: list[ImuBatch] = []
+    imu_b: list[ImuBatch] = []
+    a, b = _collect(spec, imu=imu_a), _collect(spec, imu=imu_b)
+    assert len(imu_a) > 50
+    np.testing.assert_array_equal(ImuBatch.concatenate(imu_a).accel_m_s2, ImuBatch.concatenate(imu_b).accel_m_s2)
     for fa, fb in zip(a[0], b[0]):
         np.testing.assert_array_equal(fa.rgb, fb.rgb)
         np.testing.assert_array_equal(fa.depth_mm, fb.depth_mm)

@@ -52,6 +52,23 @@ def test_replay_tracks_the_synthetic_sequence(sim_runs):
     assert doc["n_matched"] == len(res.stamps_ns)
     timing = json.loads((out / "timing.json").read_text())
     assert timing["n_frames"] == len(res.stamps_ns) and timing["sync"]["dropped_rgb"] == 0
+    # The IMU extrinsic comes from the bag's /tf_static like the cameras' (the IMU itself is not used yet).
+    assert "T_rgb_imu from /tf_static (camera_color_optical_frame -> camera_imu_optical_frame)" in res.notes
+
+
+def test_imu_extrinsic_is_read_from_tf_static(sim_runs):
+    from atsvo_ros.tools.replay import _BagSource
+
+    bag, _, _ = sim_runs["mcap"]
+    config = load_config("synthetic", overrides={"rig.T_rgb_imu": np.eye(4).reshape(-1).tolist()})
+    source = _BagSource([bag], None, config)
+    try:
+        notes: list[str] = []
+        config, _, _ = source.setup(config, notes)
+    finally:
+        source.close()
+    np.testing.assert_allclose(config.rig.T_rgb_imu_matrix(), load_config("synthetic").rig.T_rgb_imu_matrix(),
+                               atol=1e-8)
 
 
 def test_ate_identical_in_atsvo_eval_and_evo(sim_runs, tmp_path):
