@@ -43,6 +43,10 @@ setup(
         "eval": ["evo>=1.20"],
         # Benchmarks against iniVation's C++ library (atsvo-bench events).
         "bench": ["dv-processing>=2.0"],
+        # Peer RGB-D odometry on the same frames (atsvo-bench real, atsvo_ros.eval.peers). Not in "test":
+        # the wheel is ~400 MB and its import needs the system library libusb-1.0 (Debian: libusb-1.0-0);
+        # the lighter open3d-cpu wheel (~105 MB) provides the same module.
+        "peers": ["open3d>=0.18"],
         "test": [
             "pytest>=7",
             "ruff>=0.4",

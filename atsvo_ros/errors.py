@@ -37,6 +37,10 @@ class BagError(AtsvoError):
     """A bag could not be opened, or lacks a topic that the replay needs."""
 
 
+class DatasetError(BagError):
+    """A dataset folder (e.g. TUM RGB-D) lacks a file or holds a malformed line (named with its line number)."""
+
+
 class TrajectoryError(AtsvoError):
     """A trajectory file is malformed, or two trajectories cannot be associated."""
 

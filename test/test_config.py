@@ -10,7 +10,7 @@ from atsvo_ros.config import AtsvoConfig, config_dir, config_from_dict, flatten,
 from atsvo_ros.errors import ConfigError
 
 
-@pytest.mark.parametrize("name", ["mini_cheetah", "mvsec", "synthetic"])
+@pytest.mark.parametrize("name", ["mini_cheetah", "mvsec", "synthetic", "tum_fr1", "tum_fr2", "tum_fr3"])
 def test_bundled_presets_load(name):
     cfg = load_config(name)
     assert isinstance(cfg, AtsvoConfig)
@@ -30,7 +30,8 @@ def test_imu_topic_and_extrinsic_defaults_and_presets():
 
 
 def test_presets_are_the_files_in_config_dir():
-    assert sorted(p.stem for p in config_dir().glob("*.yaml")) == ["mini_cheetah", "mvsec", "synthetic"]
+    assert sorted(p.stem for p in config_dir().glob("*.yaml")) == ["mini_cheetah", "mvsec", "synthetic", "tum_fr1",
+                                                                   "tum_fr2", "tum_fr3"]
 
 
 def test_dotted_and_nested_keys_agree_and_round_trip():

@@ -1,8 +1,9 @@
 """``atsvo-replay BAG --out DIR``: run the odometry pipeline over a recorded bag, offline, without ROS.
 
 BAG is a ROS 1 .bag (several are read as one, e.g. MVSEC's data and gt bags), a ROS 2 bag
-directory (sqlite3 / mcap), a bare .mcap / .db3 file, or an MVSEC ``*_data.hdf5`` file (its
-``*_gt.hdf5`` sibling is read for depth and pose).
+directory (sqlite3 / mcap), a bare .mcap / .db3 file, an MVSEC ``*_data.hdf5`` file (its
+``*_gt.hdf5`` sibling is read for depth and pose) or a TUM RGB-D folder (rgb.txt, depth.txt,
+groundtruth.txt; :mod:`atsvo_ros.io.tum_rgbd`).
 
 Exactly the core the ROS node runs (:class:`atsvo_ros.core.odometry.Odometry` fed by the same
 :class:`~atsvo_ros.io.sync.FrameAssembler`), deterministic, streaming (memory does not grow with
@@ -243,6 +244,13 @@ class _MvsecSource:
 
 
 def _open_source(paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> Any:
+    from atsvo_ros.io.tum_rgbd import TumSource as _TumSource
+    from atsvo_ros.io.tum_rgbd import is_tum_folder
+
+    if is_tum_folder(paths[0]):
+        if len(paths) > 1:
+            raise BagError("give one TUM RGB-D folder (the one holding rgb.txt and depth.txt)")
+        return _TumSource(paths[0])
     if paths[0].suffix.lower() in (".hdf5", ".h5"):
         if len(paths) > 1:
             raise BagError("give one MVSEC *_data.hdf5 file (its *_gt.hdf5 sibling is found automatically)")
@@ -251,12 +259,14 @@ def _open_source(paths: list[Path], topics: dict[str, str | None] | None, config
 
 
 def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, config: AtsvoConfig | None = None, *,
-           mode: str | None = None, gt_path: str | Path | None = None, frame: str = "base",
+           mode: str | None = None, gt_path: str | Path | None = None, frame: str | None = None,
            topics: dict[str, str | None] | None = None, plots: bool = True, progress: bool | None = None,
            odometry_factory: Callable[..., Any] | None = None, eval_options: Any = None) -> ReplayResult:
     """Replay one bag (or MVSEC HDF5 file) through the odometry and write the outputs.
 
-    ``config=None`` picks the preset from the bag's topics; ``mode`` defaults to ``config.mode``;
+    ``config=None`` picks the preset from the bag's topics (a TUM folder: from its name); ``mode``
+    defaults to ``config.mode``; ``frame`` to ``base`` (``camera`` for a TUM folder, whose ground truth
+    is the camera pose);
     ``odometry_factory(config, rgb_camera, event_camera)`` defaults to the core's ``Odometry``.
     """
     from tqdm import tqdm
@@ -265,7 +275,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     from atsvo_ros.io.sync import FrameAssembler
     from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
 
-    if frame not in ("base", "camera"):
+    if frame not in (None, "base", "camera"):
         raise ConfigError(f"--frame must be base or camera, got {frame!r}")
     out = Path(out_dir)
     notes: list[str] = []
@@ -274,10 +284,15 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     name = " + ".join(p.name for p in paths)
     source = _open_source(paths, topics, config)
     try:
+        frame = frame or getattr(source, "default_frame", "base")
         if config is None:
-            preset = detect_preset(source.topic_types)
-            config = load_config(preset)
-            notes.append(f"config preset {preset} (from the bag's topics)")
+            if getattr(source, "preset", None):
+                config = load_config(source.preset)
+                notes.append(source.preset_note)
+            else:
+                preset = detect_preset(source.topic_types)
+                config = load_config(preset)
+                notes.append(f"config preset {preset} (from the bag's topics)")
         mode = mode or config.mode
         if mode not in ("fused", "rgbd"):
             raise ConfigError(f"--mode must be fused or rgbd, got {mode!r}")
@@ -403,15 +418,18 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``atsvo-replay``."""
     parser = argparse.ArgumentParser(prog="atsvo-replay", description=__doc__.splitlines()[0])
     parser.add_argument("bag", nargs="+", help="ROS 1 .bag (several are merged, e.g. MVSEC data + gt), ROS 2 bag "
-                        "directory (sqlite3/mcap), a .mcap/.db3 file, or an MVSEC *_data.hdf5 file")
+                        "directory (sqlite3/mcap), a .mcap/.db3 file, an MVSEC *_data.hdf5 file, or a TUM RGB-D "
+                        "folder")
     parser.add_argument("--out", required=True, help="output directory")
     add_config_args(parser)
-    parser.add_argument("--preset", choices=("mini_cheetah", "mvsec", "synthetic"),
-                        help="bundled preset (default: chosen from the bag's topics); --config wins")
+    parser.add_argument("--preset", choices=("mini_cheetah", "mvsec", "synthetic", "tum_fr1", "tum_fr2", "tum_fr3"),
+                        help="bundled preset (default: chosen from the bag's topics, or a TUM folder's name); "
+                             "--config wins")
     parser.add_argument("--mode", choices=("fused", "rgbd"), help="fused (events + RGB-D) or rgbd (never events)")
     parser.add_argument("--gt", help="ground truth TUM file (default: the bag's pose topic, if any)")
-    parser.add_argument("--frame", choices=("base", "camera"), default="base",
-                        help="pose written to trajectory.tum: robot base (default) or colour optical frame")
+    parser.add_argument("--frame", choices=("base", "camera"), default=None,
+                        help="pose written to trajectory.tum: robot base (default) or colour optical frame "
+                             "(default for a TUM folder)")
     parser.add_argument("--align", choices=("paper", "se3", "sim3", "none"), default="paper",
                         help="alignment for metrics.json (default: paper)")
     parser.add_argument("--align-s", type=float, default=2.0,
