@@ -59,9 +59,11 @@ for req in sys.argv[1:]:
     name, _, pin = req.partition("==")
     name = name.split(">=")[0]
     try:
-        if pin and version(name) != pin:
-            print(req)
+        installed = version(name)
     except PackageNotFoundError:
+        print(req)
+        continue
+    if pin and installed != pin:
         print(req)
 EOF
 )"
