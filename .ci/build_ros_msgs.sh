@@ -86,35 +86,47 @@ CACHE="$ROOT/.atsvo_cache/ros_msgs/$key"
 PREFIX="$CACHE/install"
 STAMP="$CACHE/.complete"
 
-# 3. Build (plain CMake per package: they are independent, so no colcon is needed).
+# 3. Build (plain CMake per package: they are independent, so no colcon is needed; built side by side
+#    because configuring is mostly serial Python).
+build_one() {
+  local pkg="$1"
+  # The rosidl CMake code finds the available type supports through the ament index.
+  export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+  cmake -S "$SRC/$pkg" -B "$CACHE/build/$pkg" \
+    -DCMAKE_BUILD_TYPE=Release \
+    -DCMAKE_PREFIX_PATH="$VENV" \
+    -DCMAKE_INSTALL_PREFIX="$PREFIX" \
+    -DPython3_EXECUTABLE="$VENV/bin/python" \
+    -DBUILD_TESTING=OFF \
+    -DCMAKE_PROJECT_INCLUDE="$SRC/pip_wheel_fixes.cmake"
+  cmake --build "$CACHE/build/$pkg" --parallel "$(nproc)"
+  cmake --install "$CACHE/build/$pkg"
+}
+
 if [ -f "$STAMP" ]; then
   log "cached: $PREFIX"
 else
   rm -rf "$CACHE"
   mkdir -p "$CACHE/log"
   start=$(date +%s)
+  log "building ${PACKAGES[*]} (logs: $CACHE/log)"
+  pids=()
   for pkg in "${PACKAGES[@]}"; do
-    log "building $pkg"
-    logf="$CACHE/log/$pkg.log"
-    if ! (
-      # The rosidl CMake code finds the available type supports through the ament index.
-      export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
-      cmake -S "$SRC/$pkg" -B "$CACHE/build/$pkg" \
-        -DCMAKE_BUILD_TYPE=Release \
-        -DCMAKE_PREFIX_PATH="$VENV" \
-        -DCMAKE_INSTALL_PREFIX="$PREFIX" \
-        -DPython3_EXECUTABLE="$VENV/bin/python" \
-        -DBUILD_TESTING=OFF \
-        -DCMAKE_PROJECT_INCLUDE="$SRC/pip_wheel_fixes.cmake"
-      cmake --build "$CACHE/build/$pkg" --parallel "$(nproc)"
-      cmake --install "$CACHE/build/$pkg"
-    ) >"$logf" 2>&1; then
-      tail -n 40 "$logf" >&2
-      die "$pkg failed to build (full log: $logf)"
-    fi
+    build_one "$pkg" >"$CACHE/log/$pkg.log" 2>&1 &
+    pids+=("$!")
   done
+  failed=()
+  for i in "${!PACKAGES[@]}"; do
+    wait "${pids[$i]}" || failed+=("${PACKAGES[$i]}")
+  done
+  for pkg in "${failed[@]}"; do
+    tail -n 40 "$CACHE/log/$pkg.log" >&2
+  done
+  [ ${#failed[@]} -eq 0 ] || die "failed to build: ${failed[*]} (full logs: $CACHE/log)"
   rm -rf "$CACHE/build"
   touch "$STAMP"
+  # Older keys (other sources or wheel versions) are stale: keep only this one.
+  find "$(dirname "$CACHE")" -mindepth 1 -maxdepth 1 -type d ! -name "$key" -exec rm -rf {} +
   log "built ${PACKAGES[*]} in $(( $(date +%s) - start )) s into $PREFIX"
 fi
 

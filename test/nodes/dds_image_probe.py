@@ -9,7 +9,8 @@ the ``ros`` extra::
 
 Each case starts a subscriber process, then a publisher process that sends ``--frames`` images per
 stream at ``--rate_hz`` once it has matched the subscriber, and prints the subscriber's counts.
-Discovery is kept on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) on a random domain id.
+Discovery is kept on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) on a random domain id, unless
+``--discovery_range SUBNET`` (the robot's default) is asked for inside a loopback-only network namespace.
 """
 from __future__ import annotations
 
@@ -105,10 +106,10 @@ def _subscribe(args: argparse.Namespace) -> None:
     rclpy.try_shutdown()
 
 
-def _child_env(profile: str, profile_var: str) -> dict[str, str]:
+def _child_env(profile: str, profile_var: str, discovery_range: str) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in PROFILE_VARS}
     env["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery_range
     if profile != "none":
         env[profile_var] = str(OUR_PROFILE if profile == "ours" else Path(profile).resolve())
     return env
@@ -120,7 +121,7 @@ def run_case(args: argparse.Namespace, profile: str, reliability: str) -> dict:
               "--streams", *args.streams]
     pub_rel = args.pub_reliability or reliability
     sub_rel = args.sub_reliability or reliability
-    env = _child_env(profile, args.profile_var)
+    env = _child_env(profile, args.profile_var, args.discovery_range)
     sub = subprocess.Popen([sys.executable, __file__, "sub", *common, "--sub_reliability", sub_rel],
                            env=env, stdout=subprocess.PIPE, text=True)
     try:
@@ -149,6 +150,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="'none' (Fast DDS defaults), 'ours' (config/fastdds_shm.xml) or an XML path")
     ap.add_argument("--profile_var", default=PROFILE_VARS[0], choices=PROFILE_VARS,
                     help="environment variable that names the profile to the children")
+    ap.add_argument("--discovery_range", default="LOCALHOST", choices=["LOCALHOST", "SUBNET"],
+                    help="SUBNET multicasts discovery out of every interface: use it only inside a network "
+                         "namespace that has nothing but loopback")
     ap.add_argument("--reliability", nargs="+", default=["best_effort", "reliable"])
     ap.add_argument("--pub_reliability", default=None, help="override the publisher's reliability")
     ap.add_argument("--sub_reliability", default=None, help="override the subscriber's reliability")
