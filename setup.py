@@ -19,7 +19,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        # Node parameters and the Fast DDS profile for camera-sized images (config/fastdds_shm.xml).
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml")) + ["config/fastdds_shm.xml"]),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     package_data={PACKAGE: ["config/*.yaml"]},
@@ -47,6 +48,23 @@ setup(
         # the wheel is ~400 MB and its import needs the system library libusb-1.0 (Debian: libusb-1.0-0);
         # the lighter open3d-cpu wheel (~105 MB) provides the same module.
         "peers": ["open3d>=0.18"],
+        # ROS 2 Jazzy's rclpy + messages as wheels from the package index (Fast DDS; CI and laptops). They
+        # exist for CPython 3.11 on x86_64 Linux only; elsewhere (the robot's apt Jazzy on Python 3.12) the
+        # extra installs nothing and the system's rclpy is used. No wheel exists for tf2_ros,
+        # message_filters or launch. See docs/ros_env.md.
+        "ros": [
+            f"{name}; python_version == '3.11' and platform_machine == 'x86_64' and sys_platform == 'linux'"
+            for name in (
+                "ros-jazzy-rclpy==7.1.6",
+                "ros-jazzy-rmw-fastrtps-cpp==8.4.3",
+                "ros-jazzy-std-msgs==5.3.6",
+                "ros-jazzy-std-srvs==5.3.6",
+                "ros-jazzy-geometry-msgs==5.3.6",
+                "ros-jazzy-sensor-msgs==5.3.6",
+                "ros-jazzy-nav-msgs==5.3.6",
+                "ros-jazzy-diagnostic-msgs==5.3.6",
+            )
+        ],
         "test": [
             "pytest>=7",
             "ruff>=0.4",
