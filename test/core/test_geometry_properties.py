@@ -10,8 +10,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from atsvo_ros.core.geometry import (check_pose, project_to_so3, quat_from_rotmat, rotation_angle_rad,
-                                     rotmat_from_quat, se3_exp, se3_inv, se3_log, so3_exp, so3_log)
+from atsvo_ros.core.geometry import (
+    check_pose,
+    project_to_so3,
+    quat_from_rotmat,
+    rotation_angle_rad,
+    rotmat_from_quat,
+    se3_exp,
+    se3_inv,
+    se3_log,
+    so3_exp,
+    so3_log,
+)
 
 PROPS = settings(max_examples=150, deadline=None, derandomize=True)
 finite = st.floats(-10.0, 10.0, allow_nan=False, allow_infinity=False)
