@@ -206,8 +206,7 @@ class EventDecoder:
             n_ok = kern._decode_msgs(blob, starts[i:], ends[i:], st, a.block)
             if n_ok:
                 self.stats.n_messages += n_ok - 1  # _emit counts one
-                parts.append(self._emit(st, a, ENCODINGS[st[kern.O_ENC]], int(st[kern.O_WIDTH]),
-                                        int(st[kern.O_HEIGHT])))
+                parts.append(self._emit(st, a))
             i += n_ok
             if i < len(raws):
                 if st[kern.O_ERR] == kern.ERR_NEED_SPACE and a.pos == k0 and n_ok == 0:
@@ -276,7 +275,7 @@ class EventDecoder:
             if err == kern.ERR_SLOW_PATH:  # big-endian data: the general path
                 return self._packet(parse_packet_raw(rawdata, self.ros_version))
             raise self._explain(rawdata, err)
-        return self._emit(st, a, ENCODINGS[st[kern.O_ENC]], int(st[kern.O_WIDTH]), int(st[kern.O_HEIGHT]))
+        return self._emit(st, a)
 
     def _explain(self, rawdata: bytes | memoryview, err: int) -> DecodeError:
         """The detailed error for a message the kernel refused (the Python parser mirrors its checks)."""
@@ -288,30 +287,42 @@ class EventDecoder:
         return DecodeError(f"{f.encoding} packet: event times run past int64 nanoseconds",
                            _ERR_KIND.get(err, "malformed"))
 
-    def _emit(self, st: np.ndarray, a: _Arena, encoding: str, width: int, height: int) -> EventBatch:
-        k0, n = a.pos, int(st[kern.O_N])
+    def _emit(self, st: np.ndarray, a: _Arena, encoding: str | None = None, width: int = 0,
+              height: int = 0) -> EventBatch:
+        """The batch of the last decode call (arena slots from ``a.pos``); stats and warnings updated.
+
+        Encoding and size come from the message header slots unless given.
+        """
+        out = st[kern.O_ERR:kern.P_ROS].tolist()  # one conversion instead of a numpy scalar per slot
+        if encoding is None:
+            o = kern.O_ERR
+            encoding, width, height = ENCODINGS[out[kern.O_ENC - o]], out[kern.O_WIDTH - o], out[kern.O_HEIGHT - o]
+        k0, n = a.pos, out[kern.O_N - kern.O_ERR]
         a.pos = k0 + n
         w, h = self._size(width, height)
         s = self.stats
         s.encoding = encoding
         s.n_messages += 1
         s.n_events += n
-        if st[kern.O_ANY]:
-            self._account(st, encoding, w, h)
+        if out[kern.O_ANY - kern.O_ERR]:
+            self._account(out, encoding, w, h)
         if n and self.align_to_header and encoding == "evt3" and not self._have_offset:
-            offset = int(st[kern.O_STAMP]) - int(a.t[k0])
+            offset = out[kern.O_STAMP - kern.O_ERR] - int(a.t[k0])
             a.t[k0:k0 + n] += offset
             st[kern.S_OFFSET] = offset
             st[kern.S_LAST_T] += offset
             self._have_offset = True
-        sl = slice(k0, k0 + n)
-        return EventBatch(a.x[sl], a.y[sl], a.t[sl], a.p[sl], w, h)
+        return EventBatch(a.x[k0:k0 + n], a.y[k0:k0 + n], a.t[k0:k0 + n], a.p[k0:k0 + n], w, h)
 
-    def _account(self, st: np.ndarray, encoding: str, w: int, h: int) -> None:
+    def _account(self, out: list[int], encoding: str, w: int, h: int) -> None:
+        """Add the counts of a decode call (``out``: the ``O_*`` slots as ints) to the stats; warn."""
         s = self.stats
-        oob, back, steps = int(st[kern.O_OOB]), int(st[kern.O_BACK]), int(st[kern.O_BACKSTEPS])
-        trailing, unknown = int(st[kern.O_TRAILING]), int(st[kern.O_UNKNOWN])
-        s.n_trigger += int(st[kern.O_TRIG])
+        o = kern.O_ERR
+        oob, back, steps = out[kern.O_OOB - o], out[kern.O_BACK - o], out[kern.O_BACKSTEPS - o]
+        trailing, unknown = out[kern.O_TRAILING - o], out[kern.O_UNKNOWN - o]
+        s.n_trigger += out[kern.O_TRIG - o]
+        if not (oob or back or steps or trailing or unknown):
+            return
         s.n_unknown_words += unknown
         s.n_trailing_bytes += trailing
         s.dropped_out_of_range += oob

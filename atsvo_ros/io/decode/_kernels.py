@@ -36,7 +36,8 @@ S_OFFSET = 13                                  # added to evt3 times (header ali
 O_ERR, O_STAMP, O_WIDTH, O_HEIGHT, O_ENC, O_N = 16, 17, 18, 19, 20, 21
 O_OOB, O_UNKNOWN, O_TRAILING, O_BACK, O_BACKSTEPS, O_TRIG, O_NEED, O_TB, O_ANY = 22, 23, 24, 25, 26, 27, 28, 29, 30
 P_ROS, P_WIDTH, P_HEIGHT, P_K0, P_CAP = 32, 33, 34, 35, 36  # parameters of _decode_msg
-STATE_SIZE = 40
+S_SAVED = 40  # copy of the state slots 0..O_ERR-1 while a packet is decoded (restored on ERR_NEED_SPACE)
+STATE_SIZE = S_SAVED + O_ERR
 
 # ---- error codes (O_ERR)
 OK, ERR_TRUNCATED, ERR_UNKNOWN_ENCODING, ERR_TIME_RANGE, ERR_SLOW_PATH, ERR_NEED_SPACE, ERR_BAD_HEADER = range(7)
@@ -401,6 +402,8 @@ def _fill_evt3(words, width, height, st, xs, ys, ts, ps, k0, tt, te, ti):
             steps += step
             t = ((high << 12) | low) * 1000 + offset
             tok = (not drop) or t >= last
+        elif code == 14 or code == 15 or code == 7 or code == 9:
+            pass  # OTHERS, CONTINUED_12, CONTINUED_4, padding: nothing for us
         elif code == _E3_VECT_BASE_X:
             base_x = w & 0x7FF
             vpol = (w >> 11) & 1
@@ -431,8 +434,6 @@ def _fill_evt3(words, width, height, st, xs, ys, ts, ps, k0, tt, te, ti):
                 te[n_trig] = w & 1
                 ti[n_trig] = (w >> 8) & 0xF
             n_trig += 1
-        elif code == 7 or code == 9 or code == 14 or code == 15:
-            pass  # CONTINUED_4, padding, OTHERS, CONTINUED_12
         else:
             unknown += 1
     if high > _E3_MAX_HIGH:
@@ -491,7 +492,7 @@ def _decode_payload(enc, b, off, size, tb, width, height, st, xs, ys, ts, ps, k0
     if k0 + n_words + 1 > xs.shape[0]:
         st[O_NEED] = n_words + 1
         return ERR_NEED_SPACE
-    saved = st[:O_ERR].copy()
+    st[S_SAVED:S_SAVED + O_ERR] = st[:O_ERR]
     st[O_TRAILING] = size % word
     if enc == ENC_LIBCAER_CMP:
         k = _fill_libcaer_cmp(_words16(b, off, size), tb, width, height, st, xs, ys, ts, ps, k0)
@@ -502,7 +503,7 @@ def _decode_payload(enc, b, off, size, tb, width, height, st, xs, ys, ts, ps, k0
     else:
         k = _fill_evt3(_words16(b, off, size), width, height, st, xs, ys, ts, ps, k0, tt, te, ti)
     if k == -2:
-        st[:O_ERR] = saved
+        st[:O_ERR] = st[S_SAVED:S_SAVED + O_ERR]
         for i in range(O_ERR, P_ROS):
             st[i] = 0
         st[O_NEED] = 12 * n_words + 1
@@ -616,7 +617,15 @@ def _parse_packet(b, ros_version, st):
 
 @njit(cache=True)
 def _decode_msg(b, st, block):
+    """One serialized EventPacket into the arena (see :func:`_decode_msg_into`)."""
+    return _decode_msg_into(b, st, block, np.empty(0, np.int64), np.empty(0, np.uint8))
+
+
+@njit(cache=True)
+def _decode_msg_into(b, st, block, no_i64, no_u8):
     """Serialized EventPacket -> events into the arena ``block`` from ``st[P_K0]``; returns an error code.
+
+    ``no_i64``/``no_u8`` are empty trigger outputs (triggers are only counted here).
 
     Parameters in ``st``: ``P_ROS`` (1 or 2), ``P_WIDTH``/``P_HEIGHT`` (used when the message carries
     no size), ``P_K0`` and ``P_CAP`` (arena capacity in events, see :func:`arena_views`). Few
@@ -632,8 +641,6 @@ def _decode_msg(b, st, block):
     k0 = st[P_K0]
     w = st[O_WIDTH] if st[O_WIDTH] > 0 and st[O_HEIGHT] > 0 else st[P_WIDTH]
     h = st[O_HEIGHT] if st[O_WIDTH] > 0 and st[O_HEIGHT] > 0 else st[P_HEIGHT]
-    no_i64 = np.empty(0, np.int64)
-    no_u8 = np.empty(0, np.uint8)
     err = _decode_payload(st[O_ENC], b, off, size, st[O_TB], w, h, st, xs, ys, ts, ps, k0, no_i64, no_u8, no_u8)
     st[O_ERR] = err
     return err
@@ -697,9 +704,11 @@ def _decode_msgs(blob, starts, ends, st, block):
     k = st[P_K0]
     n_ok = 0
     last_enc, last_w, last_h = 0, 0, 0
+    no_i64 = np.empty(0, np.int64)
+    no_u8 = np.empty(0, np.uint8)
     for i in range(starts.shape[0]):
         st[P_K0] = k
-        err = _decode_msg(blob[starts[i]:ends[i]], st, block)
+        err = _decode_msg_into(blob[starts[i]:ends[i]], st, block, no_i64, no_u8)
         if err != OK:
             break
         for j in (O_OOB, O_UNKNOWN, O_TRAILING, O_BACK, O_BACKSTEPS, O_TRIG, O_N):
