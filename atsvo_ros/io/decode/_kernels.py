@@ -115,10 +115,9 @@ def _words16(b, off, size):
     n = size // 2
     if (b.ctypes.data + off) % 2 == 0:
         return b[off:off + 2 * n].view(np.uint16)
-    w = np.empty(n, np.uint16)
-    for i in range(n):
-        w[i] = _u16(b, off + 2 * i)
-    return w
+    w = np.empty(2 * n, np.uint8)  # an aligned copy (ROS 1 messages put the payload anywhere)
+    w[:] = b[off:off + 2 * n]
+    return w.view(np.uint16)
 
 
 @njit(cache=True)
@@ -127,10 +126,9 @@ def _words32(b, off, size):
     n = size // 8 * 2
     if (b.ctypes.data + off) % 4 == 0:
         return b[off:off + 4 * n].view(np.uint32)
-    w = np.empty(n, np.uint32)
-    for i in range(n):
-        w[i] = _u32(b, off + 4 * i)
-    return w
+    w = np.empty(4 * n, np.uint8)
+    w[:] = b[off:off + 4 * n]
+    return w.view(np.uint32)
 
 
 # ------------------------------------------------------------------ fill passes
