@@ -375,7 +375,12 @@ def load_config(path: str | Path | None = None, node_name: str | None = None,
                               f"{exc.start}); expected a ROS-parameter YAML file") from None
         except yaml.YAMLError as exc:
             raise ConfigError(f"cannot read config {p}: {' '.join(str(exc).split())}") from None
-        params = ros_parameters(document, node_name)
+        try:
+            params = ros_parameters(document, node_name)
+            if not overrides:
+                return config_from_dict(params)
+        except ConfigError as exc:
+            raise ConfigError(f"config {p}: {exc}") from None
     if overrides:
         params = _deep_merge(params, unflatten(overrides))
     return config_from_dict(params)

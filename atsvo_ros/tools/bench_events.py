@@ -1,7 +1,8 @@
 """``atsvo-bench events``: event decoding and time-surface speed, measured side by side in one run.
 
-* Decoding: events/s of :func:`~atsvo_ros.io.decode.decode_raw` (serialized bytes -> EventBatch) for
-  every EventPacket encoding and for dvs EventArray (ROS 2 CDR and ROS 1), against rosbags' generic
+* Decoding: events/s of :meth:`~atsvo_ros.io.decode.EventDecoder.decode_raw` (serialized bytes ->
+  EventBatch, one call per message, as the node and the replay decode) for every EventPacket
+  encoding and for dvs EventArray (ROS 2 CDR and ROS 1), against rosbags' generic
   path on the same messages (``deserialize_cdr``/``deserialize_ros1``, then the fields turned into
   arrays: for dvs one Python object per event; for EventPacket rosbags stops at the payload bytes,
   so its figure is deserialization alone, a lower bound of any rosbags-based decoder). Plus the
@@ -82,7 +83,7 @@ def _rosbags_to_arrays(msg: Any, kind: str) -> int:
 
 def bench_decode(n_events: int, per_msg: int, repeats: int) -> list[dict]:
     """Decode rate per encoding, ours vs rosbags' generic deserializer."""
-    from atsvo_ros.io.decode import decode_raw
+    from atsvo_ros.io.decode import EventDecoder
     from atsvo_ros.io.msgtypes import typestore
 
     b = synthetic_events(n_events)
@@ -95,7 +96,8 @@ def bench_decode(n_events: int, per_msg: int, repeats: int) -> list[dict]:
         deser = store.deserialize_cdr if rv == 2 else store.deserialize_ros1
 
         def ours(msgs=msgs, typ=typ, rv=rv) -> int:
-            return sum(len(decode_raw(m, typ, rv)) for m in msgs)
+            dec = EventDecoder(typ, rv, drop_backwards=False)
+            return sum(len(dec.decode_raw(m)) for m in msgs)
 
         def generic(msgs=msgs, typ=typ, kind=kind, deser=deser) -> int:
             for m in msgs:

@@ -137,3 +137,13 @@ def test_bag_metadata_not_utf8(realdata, tmp_path):
     (bag / "metadata.yaml").write_bytes((src / "metadata.yaml").read_bytes() + b"# \xff\n")
     with pytest.raises(BagError, match="metadata.yaml: not UTF-8"):
         open_events(bag)
+
+
+def test_config_value_error_names_the_file(tmp_path):
+    from atsvo_ros.config import load_config
+
+    path = tmp_path / "cfg.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    ats:\n      tau_u_s: fast\n")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert str(path) in str(info.value) and "tau_u_s" in str(info.value)
