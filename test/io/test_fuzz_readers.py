@@ -21,6 +21,7 @@ from atsvo_ros.core.events import EventBatch
 from atsvo_ros.errors import AtsvoError, DecodeError
 from atsvo_ros.io.decode import EventDecoder, decode_raw
 from atsvo_ros.io.decode import _kernels as kern
+from atsvo_ros.io.decode import _msg_kernels as mkern
 from atsvo_ros.io.decode.packet import ENCODINGS, check_time_base
 from atsvo_ros.io.decode.packet_msg import parse_packet_raw
 from atsvo_ros.io.encode import serialize_dvs_event_array, serialize_event_packet
@@ -107,7 +108,7 @@ def _real_messages(realdata: Path) -> list[tuple[str, int, bytes]]:
 def _fast_path_accepts(raw: bytes, rv: int) -> bool | None:
     """Whether the kernel's header parser takes the message (None: it hands it to the Python path)."""
     st = np.zeros(kern.STATE_SIZE, np.int64)
-    err = kern._parse_packet(np.frombuffer(raw, np.uint8), rv, st)[0]
+    err = mkern._parse_packet(np.frombuffer(raw, np.uint8), rv, st)[0]
     return None if err == kern.ERR_SLOW_PATH else err == kern.OK
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.errors import DecodeError
 from atsvo_ros.io.decode import _kernels as kern
+from atsvo_ros.io.decode import _msg_kernels as mkern
 from atsvo_ros.io.decode._kernels import _count_backwards, _keep_forward
 from atsvo_ros.io.decode.dvs import decode_dvs_message, decode_dvs_raw
 from atsvo_ros.io.decode.packet import ENCODINGS, Evt3State, LibcaerState, PacketResult, check_time_base, decode_packet
@@ -119,7 +120,7 @@ class _Arena:
     def __init__(self, capacity: int) -> None:
         self.capacity = (int(capacity) + 7) // 8 * 8
         self.block = np.empty(13 * self.capacity, np.uint8)
-        self.x, self.y, self.t, self.p = kern.arena_views(self.block, self.capacity)
+        self.x, self.y, self.t, self.p = mkern.arena_views(self.block, self.capacity)
         self.pos = 0
         self._idle_refs = sys.getrefcount(self.block)  # references when no batch views the block
 
@@ -213,7 +214,7 @@ class EventDecoder:
             st, a = self._st, self._arena
             st[kern.P_K0] = k0 = a.pos
             st[kern.P_CAP] = a.capacity
-            n_ok = kern._decode_msgs(blob, starts[i:], ends[i:], st, a.block)
+            n_ok = mkern._decode_msgs(blob, starts[i:], ends[i:], st, a.block)
             if n_ok:
                 self.stats.n_messages += n_ok - 1  # _emit counts one
                 parts.append(self._emit(st, a))
@@ -276,12 +277,12 @@ class EventDecoder:
         a.rewind_if_idle()
         st[kern.P_K0] = a.pos
         st[kern.P_CAP] = a.capacity
-        err = kern._decode_msg(buf, st, a.block)
+        err = mkern._decode_msg(buf, st, a.block)
         if err == kern.ERR_NEED_SPACE:
             a = self._arena = _Arena(max(self._arena_events, int(st[kern.O_NEED])))
             st[kern.P_K0] = 0
             st[kern.P_CAP] = a.capacity
-            err = kern._decode_msg(buf, st, a.block)
+            err = mkern._decode_msg(buf, st, a.block)
         if err != kern.OK:
             if err == kern.ERR_SLOW_PATH:  # big-endian data: the general path
                 return self._packet(parse_packet_raw(rawdata, self.ros_version))
