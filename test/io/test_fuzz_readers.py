@@ -244,8 +244,15 @@ def test_fuzz_mvsec_hdf5(tmp_path):
     pytest.importorskip("h5py")
     from test.io.test_mvsec import write_mvsec
 
+    import h5py
+
     (tmp_path / "src").mkdir()
-    data = write_mvsec(tmp_path / "src", n_img=3, n_ev=300, split=False)
+    plain = write_mvsec(tmp_path / "src", n_img=3, n_ev=300, split=False)
+    data = tmp_path / "src" / "gz_data.hdf5"  # gzip chunks, as MVSEC ships: damage then fails to inflate
+    with h5py.File(plain, "r") as src, h5py.File(data, "w") as dst:
+        g = dst.create_group("davis/left")
+        for name, ds in src["davis/left"].items():
+            g.create_dataset(name, data=ds[:], compression="gzip", chunks=True)
 
     def read_mvsec(path: Path) -> None:
         from atsvo_ros.io.mvsec import MvsecReader
