@@ -242,9 +242,9 @@ def test_fuzz_prophesee_raw(realdata, tmp_path, name):
 
 def test_fuzz_mvsec_hdf5(tmp_path):
     pytest.importorskip("h5py")
-    from test.io.test_mvsec import write_mvsec
-
     import h5py
+
+    from test.io.test_mvsec import write_mvsec
 
     (tmp_path / "src").mkdir()
     plain = write_mvsec(tmp_path / "src", n_img=3, n_ev=300, split=False)
