@@ -68,6 +68,7 @@ setup(
         "test": [
             "pytest>=7",
             "ruff>=0.4",
+            "hypothesis>=6.80",  # property-based tests of the decoders and SE(3) utilities
             "aedat>=2.0",
             "h5py>=3.8",
             "evo>=1.20",

@@ -376,10 +376,22 @@ def load_config(path: str | Path | None = None, node_name: str | None = None,
     if path is not None:
         p = resolve_config_path(path)
         try:
-            document = yaml.safe_load(p.read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise ConfigError(f"cannot read config {p}: {exc}") from None
-        params = ros_parameters(document, node_name)
+            data = p.read_bytes()
+            document = yaml.safe_load(data.decode("utf-8"))
+        except OSError as exc:
+            raise ConfigError(f"cannot read config {p}: {exc.strerror or exc}") from None
+        except UnicodeDecodeError as exc:
+            line = data.count(b"\n", 0, exc.start) + 1
+            raise ConfigError(f"config {p}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                              f"{exc.start}); expected a ROS-parameter YAML file") from None
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"cannot read config {p}: {' '.join(str(exc).split())}") from None
+        try:
+            params = ros_parameters(document, node_name)
+            if not overrides:
+                return config_from_dict(params)
+        except ConfigError as exc:
+            raise ConfigError(f"config {p}: {exc}") from None
     if overrides:
         params = _deep_merge(params, unflatten(overrides))
     return config_from_dict(params)

@@ -22,7 +22,18 @@ class GeometryError(AtsvoError, ValueError):
 
 
 class DecodeError(AtsvoError):
-    """An event message or file could not be decoded (unknown encoding, truncated buffer, ...)."""
+    """An event message or file could not be decoded (unknown encoding, truncated buffer, ...).
+
+    ``kind`` names the problem in a word (``truncated``, ``unknown_encoding``, ``time_range``,
+    ``bad_header``, ``malformed``), so that decoders can count and rate-limit reports per kind.
+    """
+
+    def __init__(self, message: str, kind: str = "malformed") -> None:
+        super().__init__(message)
+        self.kind = kind
+
+    def __reduce__(self):  # keep ``kind`` through pickling (multiprocessing, logging handlers)
+        return (type(self), (str(self), self.kind))
 
 
 class ImuError(AtsvoError, ValueError):
@@ -39,6 +50,22 @@ class BagError(AtsvoError):
 
 class DatasetError(BagError):
     """A dataset folder (e.g. TUM RGB-D) lacks a file or holds a malformed line (named with its line number)."""
+
+
+class TransformError(AtsvoError, ValueError):
+    """A pose or transform read from a message is unusable (NaN/inf, zero-norm quaternion).
+
+    Carries ``topic``, ``parent``/``child`` frames and ``stamp_ns`` so that a caller can decide to
+    skip the message or stop, and report which one it was.
+    """
+
+    def __init__(self, message: str, topic: str = "", parent: str = "", child: str = "",
+                 stamp_ns: int | None = None) -> None:
+        super().__init__(message)
+        self.topic, self.parent, self.child, self.stamp_ns = topic, parent, child, stamp_ns
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.topic, self.parent, self.child, self.stamp_ns))
 
 
 class TrajectoryError(AtsvoError):

@@ -49,9 +49,10 @@ def so3_log(R: np.ndarray) -> np.ndarray:
     if R.shape[-2:] != (3, 3):
         raise GeometryError(f"so3_log needs 3x3 matrices, got shape {R.shape}")
     tr = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) * 0.5, -1.0, 1.0)
-    theta = np.arccos(tr)
     v = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
-    sin_t = np.sin(theta)
+    # sin(theta) from the antisymmetric part, not sin(arccos(...)): near pi that loses ~1e-8 relative
+    sin_t = 0.5 * np.linalg.norm(v, axis=-1)
+    theta = np.arctan2(sin_t, tr)
     small = theta < 1e-6
     scale = np.where(small, 0.5 + theta**2 / 12.0, theta / (2.0 * np.where(small, 1.0, sin_t)))
     out = v * scale[..., None]
@@ -59,8 +60,9 @@ def so3_log(R: np.ndarray) -> np.ndarray:
     if np.any(near_pi):
         Rp = R[near_pi] if R.ndim > 2 else R[None]
         th = theta[near_pi] if R.ndim > 2 else np.atleast_1d(theta)
-        # R = I + 2 hat(n)^2 near pi => n n^T = (R + I) / 2; pick the best-conditioned column.
-        B = (Rp + np.eye(3)) * 0.5
+        # R = I + 2 hat(n)^2 at pi => n n^T = (R + I) / 2; pick the best-conditioned column. Only the
+        # symmetric part: the antisymmetric one, sin(theta) hat(n), would put an O(pi - theta) error in n.
+        B = (Rp + np.swapaxes(Rp, -1, -2)) * 0.25 + np.eye(3) * 0.5
         idx = np.argmax(np.diagonal(B, axis1=-2, axis2=-1), axis=-1)
         cols = B[np.arange(len(B)), :, idx]
         n = cols / np.sqrt(np.maximum(cols[np.arange(len(B)), idx], _EPS))[:, None]

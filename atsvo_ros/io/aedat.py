@@ -12,6 +12,7 @@ import numpy as np
 
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.errors import DecodeError
+from atsvo_ros.io.read_report import ReadReport, describe
 
 
 def _decoder(path: str | Path):
@@ -23,8 +24,8 @@ def _decoder(path: str | Path):
         raise FileNotFoundError(path)
     try:
         return aedat.Decoder(str(path))
-    except Exception as exc:  # the Rust extension raises plain exceptions
-        raise DecodeError(f"{path}: not a readable AEDAT 4 file ({exc})") from exc
+    except (RuntimeError, OSError, ValueError) as exc:  # the Rust extension's errors on bad data
+        raise DecodeError(f"{path}: not a readable AEDAT 4 file ({describe(exc)})") from None
 
 
 def aedat4_event_stream(path: str | Path) -> tuple[int, int, int]:
@@ -36,11 +37,40 @@ def aedat4_event_stream(path: str | Path) -> tuple[int, int, int]:
     raise DecodeError(f"{path}: no event stream in this AEDAT 4 file")
 
 
-def iter_aedat4(path: str | Path) -> Iterator[EventBatch]:
-    """Event packets of the first event stream, in file order."""
+def iter_aedat4(path: str | Path, report: ReadReport | None = None) -> Iterator[EventBatch]:
+    """Event packets of the first event stream, in file order.
+
+    A packet the ``aedat`` decoder cannot read (bad LZ4 block, corrupt flatbuffer) is skipped and
+    counted in ``report`` (as undecodable on the ``events`` topic); a file that ends early stops
+    the iteration, noted in ``report.stopped``. Without ``report`` both raise :class:`DecodeError`.
+    """
     sid, width, height = aedat4_event_stream(path)
-    for packet in _decoder(path):
+    it = iter(_decoder(path))
+    n_packets = failures = 0
+    counts = report.topic("events") if report is not None else None
+    while True:
+        try:
+            packet = next(it)
+        except StopIteration:
+            break
+        except (RuntimeError, OSError, ValueError) as exc:  # the Rust extension's errors on bad data
+            where = f"packet {n_packets + failures + 1}: {describe(exc)}"
+            truncated = "fill whole buffer" in str(exc)
+            if report is None:
+                raise DecodeError(f"{path}: {where}", "truncated" if truncated else "malformed") from None
+            report.add_error(where)
+            failures += 1
+            counts.undecodable += 1
+            if truncated or failures - n_packets > 3:
+                report.stopped = "the file ends early (truncated)" if truncated else "repeated read errors"
+                break
+            continue
+        n_packets += 1
+        if counts is not None:
+            counts.read += 1
         if packet.get("stream_id") != sid or "events" not in packet:
             continue
         ev = packet["events"]
         yield EventBatch(ev["x"], ev["y"], ev["t"].astype(np.int64) * 1000, ev["on"].astype(np.uint8), width, height)
+    if report is not None:
+        report.finished = True

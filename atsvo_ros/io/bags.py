@@ -10,6 +10,7 @@ Python objects) by the stateful decoder of :mod:`atsvo_ros.io.decode`.
 """
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -17,7 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from atsvo_ros.errors import AtsvoError, BagError
+from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.errors import BagError, TransformError
+from atsvo_ros.io.read_report import ReadReport, container_errors, describe, iter_messages
+
+_log = logging.getLogger(__name__)
 
 #: roles the replay understands, in the order they are reported
 ROLES = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth", "tf_static", "imu")
@@ -73,10 +78,10 @@ def _metadata_ok(folder: Path) -> bool:
     if not meta.is_file():
         return False
     try:
-        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
-    except Exception:
-        return False
-    return info.get("storage_identifier") in ("sqlite3", "mcap")
+        info = yaml.safe_load(meta.read_bytes().decode("utf-8"))["rosbag2_bagfile_information"]
+        return info.get("storage_identifier") in ("sqlite3", "mcap")
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return False  # unreadable metadata: read the storage file directly
 
 
 def open_any_reader(path: str | Path | Sequence[str | Path]) -> Any:
@@ -101,8 +106,8 @@ def open_any_reader(path: str | Path | Sequence[str | Path]) -> Any:
                                + ", ".join(q.name for q in paths))
             try:
                 return AnyReader(paths, default_typestore=typestore(1))
-            except Exception as exc:
-                raise BagError(f"cannot open bags {', '.join(map(str, paths))}: {_one_line(exc)}") from None
+            except container_errors() as exc:
+                raise BagError(f"cannot open bags {', '.join(map(str, paths))}: {describe(exc)}") from None
         path = paths[0]
     p = Path(path)
     if not p.exists():
@@ -123,8 +128,8 @@ def open_any_reader(path: str | Path | Sequence[str | Path]) -> Any:
                            "or a .mcap / .db3 file")
     try:
         return AnyReader([target], default_typestore=store)
-    except Exception as exc:
-        raise BagError(f"cannot open bag {p}: {_one_line(exc)}") from None
+    except container_errors() as exc:
+        raise BagError(f"cannot open bag {p}: {describe(exc)}") from None
 
 
 # ---------------------------------------------------------------------------- topic resolution
@@ -205,11 +210,6 @@ def _event_decoder(msgtype: str, ros_version: int) -> Any:
     return EventDecoder(msgtype, ros_version)
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return text if len(text) <= 300 else text[:297] + "..."
-
-
 def _open_with_default_types(reader: Any) -> bool:
     """Open an AnyReader ignoring the bag's embedded message definitions (bundled typestore instead).
 
@@ -222,7 +222,7 @@ def _open_with_default_types(reader: Any) -> bool:
     try:
         for sub in reader.readers:
             reader.stack.enter_context(sub)
-    except Exception:
+    except container_errors():
         reader.stack.close()
         reader.stack = None
         return False
@@ -246,20 +246,16 @@ class Bag:
         paths = [Path(path)] if isinstance(path, (str, Path)) else [Path(q) for q in path]
         self.path = paths[0] if len(paths) == 1 else Path(" + ".join(str(q) for q in paths))
         self._paths = paths
+        errors = container_errors()
+        self.reader = open_any_reader(paths)
         try:
+            self.reader.open()
+        except errors as exc:
+            # Embedded definitions rosbags cannot parse (e.g. some IDL with @verbatim comments):
+            # read with the bundled typestore instead, or report the original error.
             self.reader = open_any_reader(paths)
-            try:
-                self.reader.open()
-            except Exception as exc:
-                # Embedded definitions rosbags cannot parse (e.g. some IDL with @verbatim comments):
-                # read with the bundled typestore instead, or report the original error.
-                self.reader = open_any_reader(paths)
-                if not _open_with_default_types(self.reader):
-                    raise BagError(f"cannot open bag {self.path}: {_one_line(exc)}") from None
-        except AtsvoError:
-            raise
-        except Exception as exc:
-            raise BagError(f"cannot open bag {self.path}: {_one_line(exc)}") from None
+            if not _open_with_default_types(self.reader):
+                raise BagError(f"cannot open bag {self.path}: {describe(exc)}") from None
         from atsvo_ros.io.msgtypes import register_event_types
 
         self.ros_version = 2 if self.reader.is2 else 1
@@ -267,6 +263,7 @@ class Bag:
         self.topic_types = {c.topic: c.msgtype for c in self.reader.connections}
         self.selection = resolve_topics(self.topic_types, topics, config_topics, presets)
         self.event_decoders: dict[str, Any] = {}  # topic -> EventDecoder (its .stats count drops)
+        self._reports: list[ReadReport] = []  # one per pass of messages(), see read_stats
 
     # -- context manager / info
     def __enter__(self) -> Bag:
@@ -303,21 +300,49 @@ class Bag:
                 raise BagError(f"bag {self.path} has no {role} topic (pass --{role.replace('_', '-')}-topic); "
                                f"it has: {have}")
 
+    @property
+    def read_stats(self) -> ReadReport:
+        """Per topic (and role): records the index lists, read, unreadable (skipped) and undecodable.
+
+        Merged over the passes of :meth:`messages` (each topic as counted by the latest pass that
+        read it); ``skipped`` counts are final once that pass has finished.
+        """
+        merged = ReadReport(str(self.path))
+        for rep in self._reports:
+            merged.topics.update(rep.topics)
+            for e in rep.errors:
+                merged.add_error(e)
+            merged.n_errors += rep.n_errors - len(rep.errors)
+            merged.stopped = merged.stopped or rep.stopped
+        merged.finished = all(rep.finished for rep in self._reports)
+        return merged
+
     # -- streaming
     def messages(self, roles: Iterable[str] = ROLES) -> Iterator[BagMessage]:
-        """Messages of the chosen topics for ``roles``, merged in bag (receive) time order."""
+        """Messages of the chosen topics for ``roles``, merged in bag (receive) time order.
+
+        Unreadable records are skipped and messages that fail to decode are dropped, both counted
+        in :attr:`read_stats` (and logged once per topic), so a damaged bag still replays and says
+        what it lost.
+        """
         by_topic = {t: r for r, t in self.selection.items() if r in set(roles)}
         conns = [c for c in self.reader.connections if c.topic in by_topic]
         if not conns:
             return
+        report = ReadReport(str(self.path))
+        self._reports = [r for r in self._reports if not set(r.topics) <= set(by_topic)] + [report]
+        for topic, role in by_topic.items():
+            report.topic(topic).role = role
         rank = {t: (ROLES.index(r), t) for t, r in by_topic.items()}
         group: list[tuple[Any, int, Any]] = []
-        for item in self._raw(conns):
+        for item in iter_messages(self.reader, conns, report):
             if group and item[1] != group[0][1]:
-                yield from self._emit(group, by_topic, rank)
+                yield from self._emit(group, by_topic, rank, report)
                 group = []
             group.append(item)
-        yield from self._emit(group, by_topic, rank)
+        yield from self._emit(group, by_topic, rank, report)
+        if not report.clean:
+            _log.warning("%s", report.summary())
 
     def first_messages(self, roles: Iterable[str]) -> dict[str, Any]:
         """The first deserialized message of each role present (reads only until all are found)."""
@@ -326,57 +351,71 @@ class Bag:
         found: dict[str, Any] = {}
         if not conns:
             return found
-        for conn, _, raw in self._raw(conns):
+        report = ReadReport(str(self.path))
+        for conn, t_ns, raw in iter_messages(self.reader, conns, report):
             for role, topic in wanted.items():  # one topic may serve two roles (MVSEC camera_info)
                 if topic == conn.topic and role not in found:
-                    try:
-                        found[role] = self.reader.deserialize(raw, conn.msgtype)
-                    except Exception as exc:
-                        raise BagError(f"cannot decode a {conn.msgtype} message on {conn.topic}: {exc}") from None
+                    msg = self._deserialize(conn, t_ns, raw, report)
+                    if msg is not None:
+                        found[role] = msg
             if len(found) == len(wanted):
                 break
         return found
 
-    def _raw(self, conns: list[Any]) -> Iterator[tuple[Any, int, Any]]:
-        it = self.reader.messages(connections=conns)
-        while True:
-            try:
-                yield next(it)
-            except StopIteration:
-                return
-            except AtsvoError:
-                raise
-            except Exception as exc:
-                raise BagError(f"bag {self.path} is corrupt or truncated: {exc}") from None
+    def _deserialize(self, conn: Any, t_ns: int, raw: Any, report: ReadReport) -> Any:
+        """The message, or None (counted, logged once per topic) when its bytes do not deserialize."""
+        try:
+            return self.reader.deserialize(raw, conn.msgtype)
+        except container_errors() as exc:
+            counts = report.topic(conn.topic)
+            counts.undecodable += 1
+            if counts.undecodable == 1:
+                _log.warning("%s: dropped a %s message on %s at %.3f s that does not deserialize (%s); "
+                             "further ones are counted in Bag.read_stats", self.path, conn.msgtype, conn.topic,
+                             t_ns * 1e-9, describe(exc))
+            return None
 
     def _emit(self, group: list[tuple[Any, int, Any]], by_topic: dict[str, str],
-              rank: dict[str, tuple[int, str]]) -> Iterator[BagMessage]:
+              rank: dict[str, tuple[int, str]], report: ReadReport) -> Iterator[BagMessage]:
         """Messages sharing one timestamp, in role order: the stream does not depend on the container."""
         if len(group) > 1:
             group.sort(key=lambda item: rank[item[0].topic])  # stable: per-topic order is kept
         for conn, t_ns, raw in group:
             role = by_topic[conn.topic]
-            try:
-                if role == "events":
-                    if conn.topic not in self.event_decoders:
-                        self.event_decoders[conn.topic] = _event_decoder(conn.msgtype, self.ros_version)
-                    yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns),
-                                     events=self.event_decoders[conn.topic].decode_raw(raw))
-                else:
-                    yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns),
-                                     msg=self.reader.deserialize(raw, conn.msgtype))
-            except AtsvoError:
-                raise
-            except Exception as exc:
-                raise BagError(f"cannot decode a {conn.msgtype} message on {conn.topic} "
-                               f"at {t_ns * 1e-9:.3f} s: {exc}") from None
+            if role == "events":
+                if conn.topic not in self.event_decoders:
+                    self.event_decoders[conn.topic] = _event_decoder(conn.msgtype, self.ros_version)
+                dec = self.event_decoders[conn.topic]
+                dropped = dec.stats.dropped_messages
+                events = dec.decode_raw(raw)
+                if dec.stats.dropped_messages != dropped:
+                    report.topic(conn.topic).undecodable += 1
+                    continue
+                yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns), events=events)
+            else:
+                msg = self._deserialize(conn, t_ns, raw, report)
+                if msg is not None:
+                    yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns), msg=msg)
 
 
 # ---------------------------------------------------------------------------- poses and TF
 
 
-def pose_from_msg(msg: Any) -> np.ndarray:
-    """4x4 pose from a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped."""
+def _stamp_ns(msg: Any) -> int | None:
+    st = getattr(getattr(msg, "header", None), "stamp", None)
+    if st is None:
+        return None
+    sec = getattr(st, "sec", getattr(st, "secs", 0))
+    nsec = getattr(st, "nanosec", getattr(st, "nsecs", 0))
+    return int(sec) * 1_000_000_000 + int(nsec)
+
+
+def pose_from_msg(msg: Any, topic: str = "") -> np.ndarray:
+    """4x4 pose from a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped.
+
+    Raises :class:`TransformError` naming the topic, frames and stamp when the translation or the
+    quaternion is not finite or the quaternion has zero norm (a non-unit quaternion is normalised).
+    """
     from atsvo_ros.core.geometry import pose_from_tq
 
     if hasattr(msg, "transform"):
@@ -385,7 +424,23 @@ def pose_from_msg(msg: Any) -> np.ndarray:
         pose = msg.pose
         pose = getattr(pose, "pose", pose)  # *WithCovariance / Odometry
         tr, q = pose.position, pose.orientation
-    return pose_from_tq(np.array([tr.x, tr.y, tr.z]), np.array([q.x, q.y, q.z, q.w]))
+    t = np.array([tr.x, tr.y, tr.z], dtype=np.float64)
+    quat = np.array([q.x, q.y, q.z, q.w], dtype=np.float64)
+    problem = None
+    if not np.all(np.isfinite(t)):
+        problem = f"translation is not finite {t.tolist()}"
+    elif not np.all(np.isfinite(quat)):
+        problem = f"rotation quaternion (x, y, z, w) is not finite {quat.tolist()}"
+    elif float(np.linalg.norm(quat)) < 1e-9:
+        problem = f"rotation quaternion (x, y, z, w) has zero norm {quat.tolist()}"
+    if problem is not None:
+        parent = str(getattr(getattr(msg, "header", None), "frame_id", "") or "")
+        child = str(getattr(msg, "child_frame_id", "") or "")
+        stamp = _stamp_ns(msg)
+        frames = f"{parent or '?'} -> {child}" if child else f"frame {parent or '?'}"
+        when = f" at {stamp // 1_000_000_000}.{stamp % 1_000_000_000:09d} s" if stamp is not None else ""
+        raise TransformError(f"{topic or 'pose message'} ({frames}{when}): {problem}", topic, parent, child, stamp)
+    return pose_from_tq(t, quat)
 
 
 class StaticTf:
@@ -394,13 +449,23 @@ class StaticTf:
     def __init__(self) -> None:
         self.edges: dict[str, dict[str, np.ndarray]] = {}
 
-    def add(self, msg: Any) -> None:
+    def add(self, msg: Any, topic: str = "/tf_static") -> None:
+        """Add every transform of a TFMessage; unusable ones raise :class:`TransformError` (the
+        first, with the count) after the good ones have been added."""
+        bad: list[TransformError] = []
         for tf in msg.transforms:
             parent, child = tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")
-            T = pose_from_msg(tf)
+            try:
+                T = pose_from_msg(tf, topic)
+            except TransformError as exc:
+                bad.append(exc)
+                continue
             self.edges.setdefault(parent, {})[child] = T
-            inv = np.linalg.inv(T)
-            self.edges.setdefault(child, {})[parent] = inv
+            self.edges.setdefault(child, {})[parent] = se3_inv(T)
+        if bad:
+            first = bad[0]
+            more = f" (and {len(bad) - 1} more bad transforms in this message)" if len(bad) > 1 else ""
+            raise TransformError(f"{first}{more}", first.topic, first.parent, first.child, first.stamp_ns)
 
     def lookup(self, target: str, source: str) -> np.ndarray | None:
         """``T_target_source`` by breadth-first search over the tree (None when not connected)."""

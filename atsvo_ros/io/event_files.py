@@ -17,13 +17,19 @@ import yaml
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.errors import BagError, DecodeError
 from atsvo_ros.io.decode import DVS_TYPES, PACKET_TYPES, DecodeStats, EventDecoder, normalize_msgtype
+from atsvo_ros.io.read_report import ReadReport, container_errors, describe, iter_messages
 
 EVENT_TYPES = PACKET_TYPES | DVS_TYPES
 
 
 @dataclass
 class EventSource:
-    """One event stream in a file: iterate it for batches; ``stats`` fills in while reading."""
+    """One event stream in a file: iterate it for batches; ``stats`` fills in while reading.
+
+    Unreadable records (a corrupt chunk, page or packet) are skipped and counted in ``report``
+    (:class:`~atsvo_ros.io.read_report.ReadReport`): after iterating, ``report.clean`` tells
+    whether the batches hold the whole recording.
+    """
 
     path: Path
     kind: str                  # "bag1", "bag2", "aedat4", "raw", "mvsec"
@@ -35,6 +41,7 @@ class EventSource:
     n_messages: int = 0
     stats: DecodeStats = field(default_factory=DecodeStats)
     decoder_options: dict = field(default_factory=dict)
+    report: ReadReport | None = None
     _storage: Path | None = None
 
     def __iter__(self) -> Iterator[EventBatch]:
@@ -43,7 +50,8 @@ class EventSource:
         elif self.kind == "aedat4":
             from atsvo_ros.io.aedat import iter_aedat4
 
-            for b in iter_aedat4(self.path):
+            self.report = ReadReport(str(self.path))
+            for b in iter_aedat4(self.path, self.report):
                 self._count(b)
                 yield b
         elif self.kind == "raw":
@@ -65,13 +73,20 @@ class EventSource:
         return EventBatch(b.x, b.y, b.t, b.p, self.width or b.width, self.height or b.height)
 
     def raw_messages(self) -> Iterator[bytes]:
-        """Serialized messages of the event topic, in bag order (bags only; decode with :class:`EventDecoder`)."""
+        """Serialized messages of the event topic, in bag order (bags only; decode with :class:`EventDecoder`).
+
+        Unreadable records are skipped and counted in ``report`` (a new one per call).
+        """
         if self.kind not in ("bag1", "bag2"):
             raise DecodeError(f"{self.path}: raw messages exist only in bags, this is a {self.kind} file")
-        with self._reader() as reader:
+        self.report = ReadReport(str(self.path))
+        reader = self._open_reader()
+        try:
             conns = [c for c in reader.connections if c.topic == self.topic]
-            for _conn, _t, raw in reader.messages(connections=conns):
+            for _conn, _t, raw in iter_messages(reader, conns, self.report):
                 yield raw
+        finally:
+            reader.close()
 
     # ----------------------------------------------------------------- internals
 
@@ -88,14 +103,35 @@ class EventSource:
             from rosbags.rosbag2 import Reader
         return Reader(self._storage or self.path)
 
-    def _iter_bag(self) -> Iterator[EventBatch]:
+    def _open_reader(self):
+        """The opened low-level reader (close it); BagError naming the file when it cannot be opened."""
+        try:
+            reader = self._reader()
+            reader.open()
+        except container_errors() as exc:
+            raise BagError(f"{self.path}: cannot open bag ({describe(exc)})") from None
+        return reader
+
+    def _iter_bag(self, chunk_bytes: int = 1 << 21, chunk_messages: int = 512) -> Iterator[EventBatch]:
+        """Batches of several messages each (decoded together: the per-message cost would dominate)."""
         opts = {"strict": False, **self.decoder_options}
         dec = EventDecoder(self.msgtype, 1 if self.kind == "bag1" else 2, **opts)
         self.stats = dec.stats
+        chunk: list[bytes] = []
+        size = 0
         for raw in self.raw_messages():
-            b = dec.decode_raw(raw)
-            self.width, self.height, self.encoding = dec.stats.width, dec.stats.height, dec.stats.encoding
-            yield b
+            chunk.append(raw)
+            size += len(raw)
+            if size >= chunk_bytes or len(chunk) >= chunk_messages:
+                yield self._decode_chunk(dec, chunk)
+                chunk, size = [], 0
+        if chunk:
+            yield self._decode_chunk(dec, chunk)
+
+    def _decode_chunk(self, dec: EventDecoder, chunk: list[bytes]) -> EventBatch:
+        b = dec.decode_raw_many(chunk)
+        self.width, self.height, self.encoding = dec.stats.width, dec.stats.height, dec.stats.encoding
+        return b
 
     def _iter_mvsec(self) -> Iterator[EventBatch]:
         from atsvo_ros.io.mvsec import MvsecReader
@@ -117,7 +153,13 @@ def _rosbag2_storage(path: Path) -> Path | None:
         if len(files) == 1:
             return files[0]
         raise BagError(f"{path}: no metadata.yaml and not exactly one .mcap/.db3 file inside")
-    info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+    try:
+        info = yaml.safe_load(meta.read_bytes().decode("utf-8"))["rosbag2_bagfile_information"]
+        info.get("storage_identifier")
+    except UnicodeDecodeError as exc:
+        raise BagError(f"{meta}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})") from None
+    except (yaml.YAMLError, KeyError, TypeError, AttributeError) as exc:
+        raise BagError(f"{meta}: not a rosbag2 metadata file ({describe(exc)})") from None
     if info.get("storage_identifier"):
         return None
     files = [path / f for f in info.get("relative_file_paths", [])]
@@ -128,16 +170,14 @@ def _rosbag2_storage(path: Path) -> Path | None:
 
 
 def _bag_topics(src: EventSource) -> list[tuple[str, str, int]]:
+    reader = src._open_reader()
     try:
-        with src._reader() as reader:
-            counts: dict[tuple[str, str], int] = {}
-            for c in reader.connections:
-                key = (c.topic, normalize_msgtype(c.msgtype))
-                counts[key] = counts.get(key, 0) + int(getattr(c, "msgcount", 0) or 0)
-    except BagError:
-        raise
-    except Exception as exc:  # rosbags raises several unrelated types for unreadable files
-        raise BagError(f"{src.path}: cannot open bag ({exc})") from exc
+        counts: dict[tuple[str, str], int] = {}
+        for c in reader.connections:
+            key = (c.topic, normalize_msgtype(c.msgtype))
+            counts[key] = counts.get(key, 0) + int(getattr(c, "msgcount", 0) or 0)
+    finally:
+        reader.close()
     return [(t, m, n) for (t, m), n in counts.items()]
 
 

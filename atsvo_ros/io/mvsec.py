@@ -66,11 +66,23 @@ class MvsecReader:
         if img is not None:
             self.height, self.width = int(img.shape[1]), int(img.shape[2])
 
+    def _read(self, ds: Any, sel: Any = slice(None)) -> np.ndarray:
+        """``ds[sel]`` as an array; BagError naming the file and dataset when HDF5 cannot read it."""
+        try:
+            return np.asarray(ds[sel])
+        except (OSError, ValueError, KeyError) as exc:  # h5py's errors for damaged chunks / metadata
+            raise BagError(f"MVSEC file {ds.file.filename}: cannot read {ds.name}: "
+                           f"{type(exc).__name__}: {' '.join(str(exc).split())}") from None
+
     def _get(self, name: str) -> Any:
+        key = f"{self.prefix}/{name}"
         for f in self.files:
-            key = f"{self.prefix}/{name}"
-            if key in f:
-                return f[key]
+            try:
+                if key in f:
+                    return f[key]
+            except (OSError, ValueError, KeyError) as exc:  # damaged HDF5 metadata
+                raise BagError(f"MVSEC file {f.filename}: cannot read {key}: {type(exc).__name__}: "
+                               f"{' '.join(str(exc).split())}") from None
         return None
 
     def __enter__(self) -> MvsecReader:
@@ -96,7 +108,7 @@ class MvsecReader:
         pose, ts = self._get("pose"), self._get("pose_ts")
         if pose is None or ts is None:
             raise BagError(f"no {self.prefix}/pose (+ pose_ts) in the MVSEC files")
-        return Trajectory(_ns(ts[:]), np.asarray(pose[:], dtype=np.float64)).sorted_unique()
+        return Trajectory(_ns(self._read(ts)), self._read(pose).astype(np.float64)).sorted_unique()
 
     # ------------------------------------------------------------------ streaming
     def _images(self, name: str, role: str) -> Iterator[MvsecItem]:
@@ -105,9 +117,9 @@ class MvsecReader:
             return
         if ts is None or len(ts) != len(data):
             raise BagError(f"{self.prefix}/{name} needs a matching {name}_ts dataset")
-        stamps = _ns(ts[:])
+        stamps = _ns(self._read(ts))
         for i in range(len(data)):
-            yield MvsecItem(role, int(stamps[i]), np.asarray(data[i]))
+            yield MvsecItem(role, int(stamps[i]), self._read(data, i))
 
     def _events(self) -> Iterator[MvsecItem]:
         ev = self._get("events")
@@ -116,7 +128,7 @@ class MvsecReader:
         if ev.ndim != 2 or ev.shape[1] != 4:
             raise BagError(f"{self.prefix}/events must be (N, 4) [x, y, t, p], got shape {ev.shape}")
         for i0 in range(0, len(ev), self.chunk):
-            a = np.asarray(ev[i0:i0 + self.chunk], dtype=np.float64)
+            a = self._read(ev, slice(i0, i0 + self.chunk)).astype(np.float64)
             b = EventBatch(a[:, 0].astype(np.uint16), a[:, 1].astype(np.uint16), _ns(a[:, 2]),
                            (a[:, 3] > 0).astype(np.uint8), self.width, self.height)
             yield MvsecItem("events", b.t_first_ns, b)

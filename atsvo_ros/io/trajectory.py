@@ -55,24 +55,52 @@ class Trajectory:
         return Trajectory(self.stamps_ns, P)
 
 
+_INT64_MAX = (1 << 63) - 1
+
+
 def _seconds_to_ns(text: str) -> int:
-    """Exact conversion of a decimal seconds string to int64 ns (no float round-off)."""
-    whole, _, frac = text.strip().partition(".")
-    if whole.startswith("-"):
-        return -_seconds_to_ns(text.strip()[1:])
-    frac = (frac + "000000000")[:9]
-    return int(whole or "0") * 1_000_000_000 + int(frac)
+    """Exact conversion of a decimal seconds string to int64 ns (no float round-off).
+
+    Raises ValueError for anything but a finite number of seconds that fits int64 nanoseconds.
+    """
+    text = text.strip()
+    if "e" in text.lower():  # exponent notation: float, then checked
+        value = float(text)
+        if not np.isfinite(value):
+            raise ValueError(f"stamp {text!r} is not finite")
+        ns = int(round(value * 1e9))
+    else:
+        negative = text.startswith("-")
+        whole, _, frac = text.lstrip("+-").partition(".")
+        if not (whole or frac) or not (whole or "0").isdigit() or not (frac or "0").isdigit():
+            raise ValueError(f"stamp {text!r} is not a number of seconds")
+        ns = int(whole or "0") * 1_000_000_000 + int((frac + "000000000")[:9])
+        ns = -ns if negative else ns
+    if not -_INT64_MAX <= ns <= _INT64_MAX:
+        raise ValueError(f"stamp {text!r} s does not fit int64 nanoseconds")
+    return ns
 
 
 def read_tum(path: str | Path) -> Trajectory:
-    """Read a TUM file; comments (#) and blank lines are skipped, stamps parsed exactly."""
+    """Read a TUM file; comments (#) and blank lines are skipped, stamps parsed exactly.
+
+    Every problem raises :class:`TrajectoryError` naming ``file:line``: a wrong column count, a
+    value that is not a number, NaN/inf, a zero-norm quaternion, text that is not UTF-8.
+    Quaternions are normalised (files often carry slightly non-unit ones).
+    """
     path = Path(path)
     try:
-        lines = path.read_text().splitlines()
+        data = path.read_bytes()
     except OSError as exc:
         raise TrajectoryError(f"cannot read trajectory {path}: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise TrajectoryError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                              f"{exc.start}); expected a TUM trajectory 't tx ty tz qx qy qz qw'") from None
     stamps, values = [], []
-    for lineno, line in enumerate(lines, 1):
+    for lineno, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
@@ -80,16 +108,20 @@ def read_tum(path: str | Path) -> Trajectory:
         if len(parts) != 8:
             raise TrajectoryError(f"{path}:{lineno}: expected 8 columns (t tx ty tz qx qy qz qw), got {len(parts)}")
         try:
-            stamps.append(_seconds_to_ns(parts[0]) if "e" not in parts[0].lower()
-                          else int(round(float(parts[0]) * 1e9)))
-            values.append([float(v) for v in parts[1:]])
-        except ValueError:
-            raise TrajectoryError(f"{path}:{lineno}: not a number in {line!r}") from None
+            stamp = _seconds_to_ns(parts[0])
+            v = [float(x) for x in parts[1:]]
+        except ValueError as exc:
+            raise TrajectoryError(f"{path}:{lineno}: not a number in {line!r} ({exc})") from None
+        bad = [name for name, x in zip(("tx", "ty", "tz", "qx", "qy", "qz", "qw"), v) if not np.isfinite(x)]
+        if bad:
+            raise TrajectoryError(f"{path}:{lineno}: {', '.join(bad)} not finite in {line!r}")
+        if float(np.linalg.norm(v[3:])) < 1e-9:
+            raise TrajectoryError(f"{path}:{lineno}: the quaternion (qx qy qz qw) has zero norm in {line!r}")
+        stamps.append(stamp)
+        values.append(v)
     if not stamps:
         raise TrajectoryError(f"{path} holds no poses")
     v = np.asarray(values)
-    if np.any(np.linalg.norm(v[:, 3:], axis=1) < 1e-9):
-        raise TrajectoryError(f"{path}: a quaternion has zero norm")
     return Trajectory(np.asarray(stamps, dtype=np.int64), pose_from_tq(v[:, :3], v[:, 3:]))
 
 

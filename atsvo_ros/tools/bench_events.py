@@ -1,7 +1,8 @@
 """``atsvo-bench events``: event decoding and time-surface speed, measured side by side in one run.
 
-* Decoding: events/s of :func:`~atsvo_ros.io.decode.decode_raw` (serialized bytes -> EventBatch) for
-  every EventPacket encoding and for dvs EventArray (ROS 2 CDR and ROS 1), against rosbags' generic
+* Decoding: events/s of :meth:`~atsvo_ros.io.decode.EventDecoder.decode_raw` (serialized bytes ->
+  EventBatch, one call per message, as the node and the replay decode) for every EventPacket
+  encoding and for dvs EventArray (ROS 2 CDR and ROS 1), against rosbags' generic
   path on the same messages (``deserialize_cdr``/``deserialize_ros1``, then the fields turned into
   arrays: for dvs one Python object per event; for EventPacket rosbags stops at the payload bytes,
   so its figure is deserialization alone, a lower bound of any rosbags-based decoder). Plus the
@@ -82,7 +83,7 @@ def _rosbags_to_arrays(msg: Any, kind: str) -> int:
 
 def bench_decode(n_events: int, per_msg: int, repeats: int) -> list[dict]:
     """Decode rate per encoding, ours vs rosbags' generic deserializer."""
-    from atsvo_ros.io.decode import decode_raw
+    from atsvo_ros.io.decode import EventDecoder
     from atsvo_ros.io.msgtypes import typestore
 
     b = synthetic_events(n_events)
@@ -95,7 +96,8 @@ def bench_decode(n_events: int, per_msg: int, repeats: int) -> list[dict]:
         deser = store.deserialize_cdr if rv == 2 else store.deserialize_ros1
 
         def ours(msgs=msgs, typ=typ, rv=rv) -> int:
-            return sum(len(decode_raw(m, typ, rv)) for m in msgs)
+            dec = EventDecoder(typ, rv, drop_backwards=False)
+            return sum(len(dec.decode_raw(m)) for m in msgs)
 
         def generic(msgs=msgs, typ=typ, kind=kind, deser=deser) -> int:
             for m in msgs:
@@ -115,28 +117,63 @@ def bench_decode(n_events: int, per_msg: int, repeats: int) -> list[dict]:
     return rows
 
 
+#: real recordings decoded by the benchmark: (path under realdata, ROS version of its serialization)
+REAL_BAGS = (("event_camera_py_bags/test_events_2", 2), ("event_camera_codecs_bags/test_data_libcaer_rollover", 2),
+             ("event_camera_py_bags/test_events_1", 2), ("event_camera_py_bags/test_events_1.bag", 1),
+             ("event_camera_codecs_bags/test_data_evt3_trigger", 2), ("event_camera_codecs_bags/test_data_mono_cd", 2))
+
+
 def bench_real_decode(repeats: int) -> list[dict]:
-    """Decode rate on the real bags (raw message bytes -> EventBatch, stateful decoder)."""
+    """Decode rate on the real bags (raw message bytes -> EventBatch, stateful decoder).
+
+    Three figures on the same messages: ``ours_eps`` one :meth:`EventDecoder.decode_raw` call per
+    message (what the node and the replay do), ``ours_many_eps`` :meth:`EventDecoder.decode_raw_many`
+    over the whole recording (what offline tools do), and ``rosbags_eps`` rosbags' generic
+    deserializer on the same bytes (it stops at the payload bytes: deserialization alone, a lower
+    bound of the cost of any rosbags-based decoder).
+    """
     from atsvo_ros.io.decode import EventDecoder
     from atsvo_ros.io.event_files import open_events
+    from atsvo_ros.io.msgtypes import typestore
 
     rows = []
-    for rel in ("event_camera_py_bags/test_events_2", "event_camera_codecs_bags/test_data_libcaer_rollover",
-                "event_camera_py_bags/test_events_1", "event_camera_codecs_bags/test_data_evt3_trigger"):
+    for rel, rv in REAL_BAGS:
         path = REALDATA / rel
         if not path.exists():
             continue
         src = open_events(path)
-        n = sum(len(b) for b in src)  # also fills in src.encoding
         raws = [bytes(raw) for raw in src.raw_messages()]
+        n = len(EventDecoder(src.msgtype, rv).decode_raw_many(raws))
+        store = typestore(rv)
+        deser = store.deserialize_cdr if rv == 2 else store.deserialize_ros1
+        msgtype = src.msgtype
 
-        def run(raws=raws, msgtype=src.msgtype) -> int:
-            dec = EventDecoder(msgtype, 2)
+        def per_message(raws=raws, msgtype=msgtype, rv=rv) -> int:
+            dec = EventDecoder(msgtype, rv)
             return sum(len(dec.decode_raw(r)) for r in raws)
 
-        rows.append({"file": rel, "encoding": src.encoding, "events": n, "messages": len(raws),
-                     "ours_eps": _best_rate(run, repeats)})
+        def many(raws=raws, msgtype=msgtype, rv=rv) -> int:
+            return len(EventDecoder(msgtype, rv).decode_raw_many(raws))
+
+        def generic(raws=raws, msgtype=msgtype, deser=deser, n=n) -> int:
+            for r in raws:
+                deser(r, msgtype)
+            return n
+
+        rows.append({"file": rel, "ros_version": rv, "encoding": _encoding_of(raws[0], msgtype, rv),
+                     "events": n, "messages": len(raws),
+                     "bytes_per_event": sum(map(len, raws)) / max(n, 1),
+                     "ours_eps": _best_rate(per_message, repeats), "ours_many_eps": _best_rate(many, repeats),
+                     "rosbags_eps": _best_rate(generic, max(1, repeats // 2), min_time_s=0.1)})
     return rows
+
+
+def _encoding_of(raw: bytes, msgtype: str, rv: int) -> str:
+    from atsvo_ros.io.decode import EventDecoder
+
+    dec = EventDecoder(msgtype, rv)
+    dec.decode_raw(raw)
+    return dec.stats.encoding
 
 
 def _dv_store(b: EventBatch):
@@ -238,9 +275,12 @@ def main_events(args: argparse.Namespace) -> int:
               f"rosbags {_fmt(r['rosbags_eps'])} {ratio}  ({r['rosbags_note']})")
     real = bench_real_decode(args.repeats)
     if real:
-        print("decode (real recordings, stateful EventDecoder)")
+        print("decode (real recordings, stateful EventDecoder: per message / whole recording at once; rosbags: "
+              "deserialize only)")
         for r in real:
-            print(f"  {r['file']:52s} {r['encoding']:11s} {r['events']:8d} ev  ours {_fmt(r['ours_eps'])}")
+            print(f"  {r['file']:52s} ROS {r['ros_version']} {r['encoding']:11s} {r['events']:7d} ev "
+                  f"{r['events'] / r['messages']:6.0f} ev/msg  ours {_fmt(r['ours_eps'])} / {_fmt(r['ours_many_eps'])}"
+                  f"  rosbags {_fmt(r['rosbags_eps'])}")
     print("time surfaces (update: events/s; render: median ms incl. blur + median blur; raw: before them)")
     ts = bench_time_surfaces(args.repeats)
     for r in ts:

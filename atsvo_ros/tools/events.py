@@ -5,7 +5,9 @@
   decoders' checksum processors; ``sum_p`` counts ON events). Times are as the encoding carries them:
   evt3 and Prophesee RAW report the camera clock, the others ROS time. Like ``ros2 bag info``, for
   events; reads ROS 1/2 bags (EventPacket in every encoding, dvs/dv_ros2 EventArray), .mcap/.db3,
-  .aedat4, Prophesee .raw and MVSEC .hdf5.
+  .aedat4, Prophesee .raw and MVSEC .hdf5. A file that cannot be opened gives one error line and exit
+  code 1; records that cannot be read mid-stream are skipped: the figures of what could be read are
+  printed, followed by one error line naming the file, topic and what was skipped, and exit code 1.
 * ``atsvo-events render PATH --out DIR`` -- the paper's Fig. 4 and 5 for a recording: constant-tau
   time surface next to the ATS at the slowest and the fastest moment (by event rate), and the event
   pixel selection on the ATS (candidates rejected by the mask or by Eq. 3 in red, selected in green).
@@ -42,7 +44,7 @@ def event_stats(path: str | Path, topic: str | None = None, progress: bool = Fal
     t_first = t_last = None
     with tqdm(total=src.n_messages or None, unit="msg", disable=not progress, file=sys.stderr) as bar:
         for b in src:
-            bar.update(1)
+            bar.update(max(0, src.stats.n_messages - bar.n) if src.kind in ("bag1", "bag2") else 1)
             if len(b) == 0:
                 continue
             n += len(b)
@@ -88,6 +90,11 @@ def _stats(args: argparse.Namespace) -> int:
         print(json.dumps(stats, indent=2))
     else:
         _print_stats(args.path, stats, src)
+    if src.report is not None and not src.report.clean:
+        topic = f" topic {src.topic}:" if src.topic else ""
+        print(f"atsvo-events: error:{topic} incomplete read, the figures above cover what could be read; "
+              f"{src.report.summary()}", file=sys.stderr)
+        return 1
     return 0
 
 

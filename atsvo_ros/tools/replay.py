@@ -115,7 +115,7 @@ def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[s
         return cfg
     tf = StaticTf()
     for m in bag.messages(["tf_static"]):
-        tf.add(m.msg)
+        tf.add(m.msg, m.topic)
     updates: dict[str, Any] = {}
     rgb_frame = first["rgb"].header.frame_id if "rgb" in first else ""
     if rgb_frame:
@@ -146,6 +146,7 @@ class _BagSource:
 
         self.bag = Bag(paths, topics=topics, config_topics=vars(config.topics) if config else None)
         self.topic_types = self.bag.topic_types
+        self.bad_poses: list[str] = []  # ground-truth messages skipped (NaN, zero quaternion)
 
     def close(self) -> None:
         self.bag.close()
@@ -169,6 +170,7 @@ class _BagSource:
 
     def feed(self, assembler: Any, use_events: bool, gt: list | None) -> Any:
         """Generator: feeds one message per step into ``assembler`` (and ground truth into ``gt``)."""
+        from atsvo_ros.errors import TransformError
         from atsvo_ros.io.bags import pose_from_msg
         from atsvo_ros.io.images import stamp_ns
 
@@ -181,11 +183,22 @@ class _BagSource:
             elif m.role == "events":
                 assembler.add_events(m.events)
             else:
-                gt.append((stamp_ns(m.msg), pose_from_msg(m.msg)))
+                try:
+                    gt.append((stamp_ns(m.msg), pose_from_msg(m.msg, m.topic)))
+                except TransformError as exc:
+                    self.bad_poses.append(str(exc))
             yield
 
     def decoder_stats(self) -> dict[str, Any]:
         return {t: d.stats.as_dict() for t, d in self.bag.event_decoders.items() if hasattr(d, "stats")}
+
+    def read_problems(self) -> tuple[dict[str, Any] | None, list[str]]:
+        """(the bag's read report, notes on what was lost: unreadable records, skipped poses)."""
+        report = self.bag.read_stats
+        notes = [] if report.clean else [f"bag damaged: {report.summary()}"]
+        if self.bad_poses:
+            notes.append(f"skipped {len(self.bad_poses)} unusable ground-truth poses, first: {self.bad_poses[0]}")
+        return report.as_dict(), notes
 
 
 class _MvsecSource:
@@ -241,6 +254,9 @@ class _MvsecSource:
 
     def decoder_stats(self) -> dict[str, Any]:
         return {}
+
+    def read_problems(self) -> tuple[dict[str, Any] | None, list[str]]:
+        return None, []
 
 
 def _open_source(paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> Any:
@@ -344,6 +360,8 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         bag_duration = source.duration_s()
         sync_stats = dataclasses.asdict(assembler.stats)
         dec_stats = source.decoder_stats()
+        read_stats, read_notes = source.read_problems()
+        notes.extend(read_notes)
     finally:
         source.close()
     if not stamps:
@@ -366,7 +384,8 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
               "tracking_time_mean_s": float(np.mean(tt)), "tracking_time_p95_s": float(np.percentile(tt, 95)),
               "tracking_time_max_s": float(np.max(tt)),
               "status_counts": {s: statuses.count(s) for s in sorted(set(statuses))},
-              "sync": sync_stats, "event_decoders": dec_stats, "notes": notes, "frames": frames_info}
+              "sync": sync_stats, "event_decoders": dec_stats, "bag_read": read_stats,
+              "notes": notes, "frames": frames_info}
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
     gt = gt_file
     if gt is None and gt_samples:

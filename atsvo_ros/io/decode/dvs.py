@@ -32,7 +32,7 @@ class DvsArray:
 
 def _need(buf: memoryview, end: int, what: str) -> None:
     if end > len(buf):
-        raise DecodeError(f"truncated message: {what} needs {end} bytes, buffer has {len(buf)}")
+        raise DecodeError(f"truncated message: {what} needs {end} bytes, buffer has {len(buf)}", "truncated")
 
 
 def parse_ros1_header(buf: memoryview, pos: int = 0) -> tuple[int, str, int]:
@@ -52,7 +52,7 @@ def parse_cdr_header(buf: memoryview) -> tuple[str, int, str, int]:
     _need(buf, 16, "CDR header")
     kind = buf[1]
     if kind not in (0, 1):
-        raise DecodeError(f"unsupported CDR encapsulation kind {kind} (expected plain CDR)")
+        raise DecodeError(f"unsupported CDR encapsulation kind {kind} (expected plain CDR)", "bad_header")
     e = "<" if kind == 1 else ">"
     sec, nsec, n = struct.unpack_from(f"{e}iII", buf, 4)
     pos = 12
