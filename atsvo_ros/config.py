@@ -42,6 +42,9 @@ class CameraConfig:
     distortion_model: str = _f("plumb_bob", choices=("none", "plumb_bob", "rational_polynomial", "equidistant"))
     D: tuple[float, ...] = _f((0.0, 0.0, 0.0, 0.0, 0.0))
     use_camera_info: bool = _f(True, doc="prefer the camera_info topic over these values")
+    readout_time_s: float = _f(0.0, 0.0, 1.0, doc="rolling-shutter readout time, first to last row (0 = global "
+                               "shutter, e.g. the D455's colour and depth imagers)")
+    time_offset_s: float = _f(0.0, -1.0, 1.0, doc="exposure time of the middle row minus the image stamp")
 
     def model(self):
         """The :class:`~atsvo_ros.core.camera.CameraModel` these values describe."""
@@ -148,6 +151,20 @@ class TrackerConfig:
                                 doc="stop when the update norm (m, rad) falls below this (x2 per pyramid level)")
     w_rgb: float = _f(1.0, 0.0, 1e6, doc="omega_1 of Eq. 4")
     w_event: float = _f(1.0, 0.0, 1e6, doc="omega_2 of Eq. 4 (0 = RGB only)")
+    photometric_sigma: float = _f(8.0, 0.0, 255.0, lo_open=True,
+                                  doc="noise scale of a photometric residual (intensity): residuals are divided by "
+                                      "it so the depth term combines with them in one system")
+    w_depth: float = _f(1.0, 0.0, 1e6, doc="weight of the point-to-plane depth term (0 = the paper's formulation: "
+                                           "photometric only)")
+    depth_sigma_at_1m_m: float = _f(0.004, 0.0, 1.0, lo_open=True,
+                                    doc="depth noise at 1 m (grows with z^2): the depth term's noise scale")
+    depth_sigma_min_m: float = _f(0.002, 0.0, 1.0, lo_open=True, doc="floor of the depth noise scale")
+    depth_huber: float = _f(2.0, 0.0, 100.0, lo_open=True, doc="Huber threshold of the depth term (noise units)")
+    depth_outlier: float = _f(10.0, 0.0, 1000.0, lo_open=True,
+                              doc="depth residual (noise units) above which a point is an outlier")
+    rotation_hypotheses_deg: float = _f(0.0, 0.0, 45.0, doc="besides constant and zero motion, start from the "
+                                        "prediction rotated by +-this about each camera axis (0 = off)")
+    refine_guesses: int = _f(1, 1, 32, doc="initial guesses optimised on the coarsest level before the best is kept")
     motion_threshold_rot_deg: float = _f(3.0, 0.0, 180.0, doc="inter-frame rotation that activates event fusion")
     motion_threshold_trans_m: float = _f(0.05, 0.0, 10.0, doc="inter-frame translation that activates event fusion")
     min_inlier_fraction: float = _f(0.3, 0.0, 1.0, doc="below this the frame is lost")
@@ -172,6 +189,12 @@ class TrackerConfig:
                                      "pose error match the covariance on rendered frames)")
     max_gain_ratio: float = _f(2.0, 1.0, 100.0, lo_open=True,
                                doc="brightness gain change between frames beyond [1/x, x] counts as lost")
+    min_zncc: float = _f(0.5, -1.0, 1.0, doc="mean ZNCC of the inlier patches after alignment below which the "
+                         "frame is degraded (the patches landed on other texture)")
+    lost_zncc: float = _f(0.2, -1.0, 1.0, doc="mean ZNCC below which the frame is lost")
+    min_depth_inlier_fraction: float = _f(0.5, 0.0, 1.0, doc="depth-term inliers / visible below which the frame "
+                                          "is degraded (the photometric optimum disagrees with the geometry)")
+    degraded_covariance_scale: float = _f(100.0, 1.0, 1e12, doc="factor on the covariance of a degraded frame")
 
 
 @dataclass(frozen=True)
@@ -190,6 +213,8 @@ class MappingConfig:
     max_outlier_frames: int = _f(5, 1, 1000, doc="cull a map point after this many consecutive outlier frames")
     depth_window_px: int = _f(5, 1, 31, doc="a map point's depth is the mean of the valid depths in this window "
                                          "(and the depth-edge test spans it); 1 = the pixel's own depth")
+    depth_points: int = _f(800, 0, 100000, doc="geometric points (smooth valid depth, regular grid) per keyframe "
+                                               "for the depth term")
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,12 @@
-"""Map of the RGB-D odometry: keyframes, map points with per-level patches, the temporary event map.
+"""The map: keyframes, photometric map points with per-level patches, geometric points, snapshots.
 
-A map point is a selected pixel of a keyframe back-projected with the aligned depth; it stores the
-intensities of the residual pattern around it on every pyramid level of its host keyframe (Section
-II-C), divided into a common brightness scale with the keyframe's affine parameters so points of
-different keyframes are comparable. The local map is the points of the last ``max_keyframes``
-keyframes; :meth:`PointMap.cull` keeps memory bounded on long runs.
+A photometric map point is a selected pixel of a keyframe back-projected with the aligned depth; it
+stores the intensities of the residual pattern around it on every pyramid level of its host keyframe
+(Section II-C), divided into a common brightness scale with the keyframe's affine parameters so
+points of different keyframes are comparable. A geometric point is a pixel of smooth valid depth
+(for the point-to-plane term). Tracking never sees the mutable store: it reads a
+:class:`MapSnapshot`, an immutable copy that mapping replaces after each keyframe (DSO's coarse
+tracking reference), so tracking and mapping can run in one thread or in two.
 """
 from __future__ import annotations
 
@@ -12,22 +14,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from atsvo_ros.config import MappingConfig, RigConfig
-from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.config import RigConfig
 from atsvo_ros.core.geometry import transform_points
 from atsvo_ros.core.photometric import level_position, sample_patches
 from atsvo_ros.errors import TrackingError
 
 
-@dataclass
+@dataclass(frozen=True)
 class Keyframe:
-    """A keyframe: its pose, brightness parameters and how many points it hosts."""
+    """A keyframe: its pose (``T_w_c``, colour camera) and the brightness parameters of its patches."""
 
     kf_id: int
     stamp_ns: int
     T_w_c: np.ndarray
     affine: tuple[float, float]
-    n_points: int = 0
 
 
 def valid_depth_mask(depth_m: np.ndarray, rig: RigConfig, edge_ratio: float | None = None,
@@ -91,8 +91,51 @@ def extract_patches(pyramid: list[np.ndarray], uv0: np.ndarray, pattern: np.ndar
     return out
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class MapSnapshot:
+    """What tracking reads: an immutable copy of the local map, replaced (never edited) by mapping.
+
+    ``snapshot_id`` increases with every replacement, so observations made against one snapshot
+    (per-point outlier runs) are matched to it. ``n_reference`` / ``healthy_reference`` are the
+    tracked points and healthy regions right after the last keyframe: the nine-region rule of
+    :mod:`atsvo_ros.core.keyframes` compares the current frame with them.
+    """
+
+    snapshot_id: int
+    points_w: np.ndarray  # (N, 3) photometric points
+    patches: np.ndarray  # (L, N, P) float32
+    host_depth: np.ndarray  # (N,) depth in the host keyframe
+    host: np.ndarray  # (N,) host keyframe id
+    geo_points_w: np.ndarray  # (M, 3) geometric points
+    keyframes: tuple[Keyframe, ...]
+    n_reference: int
+    healthy_reference: int
+
+    def __post_init__(self) -> None:
+        for name in ("points_w", "patches", "host_depth", "host", "geo_points_w"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+    @classmethod
+    def empty(cls, n_levels: int, pattern_size: int, snapshot_id: int = 0) -> MapSnapshot:
+        return cls(snapshot_id, np.zeros((0, 3)), np.zeros((n_levels, 0, pattern_size), np.float32), np.zeros(0),
+                   np.zeros(0, np.int32), np.zeros((0, 3)), (), 1, 9)
+
+    def __len__(self) -> int:
+        return len(self.points_w)
+
+    @property
+    def last_keyframe(self) -> Keyframe | None:
+        return self.keyframes[-1] if self.keyframes else None
+
+
 class PointMap:
-    """Struct-of-arrays store of map points and the keyframes hosting them."""
+    """The mutable store behind the snapshots (struct of arrays), owned by the mapper."""
 
     def __init__(self, n_levels: int, pattern_size: int) -> None:
         self.n_levels = int(n_levels)
@@ -102,80 +145,69 @@ class PointMap:
         self.points_w = np.zeros((0, 3))
         self.patches = np.zeros((self.n_levels, 0, self.pattern_size), dtype=np.float32)
         self.host = np.zeros(0, dtype=np.int32)
-        self.outlier_run = np.zeros(0, dtype=np.int32)
         self.host_depth = np.zeros(0)
+        self.geo_points_w = np.zeros((0, 3))
+        self.geo_host = np.zeros(0, dtype=np.int32)
 
     def __len__(self) -> int:
         return len(self.points_w)
 
-    @property
-    def last_keyframe(self) -> Keyframe | None:
-        return self.keyframes[max(self.keyframes)] if self.keyframes else None
-
     def add_keyframe(self, stamp_ns: int, T_w_c: np.ndarray, affine: tuple[float, float],
-                     points_c: np.ndarray, patches: np.ndarray) -> Keyframe:
-        """Insert a keyframe and its new points (camera frame ``points_c``, patches ``(L, N, P)``)."""
+                     points_c: np.ndarray, patches: np.ndarray, geo_points_c: np.ndarray | None = None) -> Keyframe:
+        """Insert a keyframe, its photometric points (camera frame, patches ``(L, N, P)``) and geometric points."""
         points_c = np.asarray(points_c, dtype=np.float64).reshape(-1, 3)
+        geo = np.zeros((0, 3)) if geo_points_c is None else np.asarray(geo_points_c, dtype=np.float64).reshape(-1, 3)
         patches = np.asarray(patches, dtype=np.float32)
         if patches.shape != (self.n_levels, len(points_c), self.pattern_size):
             raise TrackingError(f"patches shape {patches.shape} does not match "
                                 f"({self.n_levels}, {len(points_c)}, {self.pattern_size})")
-        if not np.all(np.isfinite(points_c)) or (len(points_c) and points_c[:, 2].min() <= 0):
-            raise TrackingError("map points need finite positions in front of the camera")
+        for name, p in (("map points", points_c), ("geometric points", geo)):
+            if not np.all(np.isfinite(p)) or (len(p) and p[:, 2].min() <= 0):
+                raise TrackingError(f"{name} need finite positions in front of the camera")
         kf = Keyframe(self._next_kf, int(stamp_ns), np.asarray(T_w_c, dtype=np.float64).copy(),
-                      (float(affine[0]), float(affine[1])), len(points_c))
+                      (float(affine[0]), float(affine[1])))
         self._next_kf += 1
         self.keyframes[kf.kf_id] = kf
         self.points_w = np.concatenate([self.points_w, transform_points(kf.T_w_c, points_c)])
         self.patches = np.ascontiguousarray(np.concatenate([self.patches, patches], axis=1))
         self.host = np.concatenate([self.host, np.full(len(points_c), kf.kf_id, dtype=np.int32)])
-        self.outlier_run = np.concatenate([self.outlier_run, np.zeros(len(points_c), dtype=np.int32)])
         self.host_depth = np.concatenate([self.host_depth, points_c[:, 2]])
+        self.geo_points_w = np.concatenate([self.geo_points_w, transform_points(kf.T_w_c, geo)])
+        self.geo_host = np.concatenate([self.geo_host, np.full(len(geo), kf.kf_id, dtype=np.int32)])
         return kf
 
     def remove_points(self, remove: np.ndarray) -> int:
-        """Drop points where ``remove`` is True; returns how many were dropped."""
+        """Drop photometric points where ``remove`` is True; returns how many were dropped."""
         keep = ~np.asarray(remove, dtype=bool)
         n = int((~keep).sum())
         if n:
             self.points_w = self.points_w[keep]
             self.patches = np.ascontiguousarray(self.patches[:, keep])
             self.host = self.host[keep]
-            self.outlier_run = self.outlier_run[keep]
             self.host_depth = self.host_depth[keep]
-            for kf in self.keyframes.values():
-                kf.n_points = int((self.host == kf.kf_id).sum())
         return n
 
-    def update_observations(self, states: np.ndarray) -> None:
-        """Count consecutive outlier frames per point (tracker states: 1 inlier, 2 outlier)."""
-        states = np.asarray(states)
-        if len(states) != len(self):
-            raise TrackingError(f"{len(states)} point states for a map of {len(self)} points")
-        self.outlier_run = np.where(states == 2, self.outlier_run + 1,
-                                    np.where(states == 1, 0, self.outlier_run)).astype(np.int32)
-
-    def cull(self, config: MappingConfig) -> int:
-        """Bound the map: drop repeated outliers, keyframes beyond the window and the oldest excess points."""
-        removed = self.remove_points(self.outlier_run >= config.max_outlier_frames)
-        while len(self.keyframes) > config.max_keyframes:
+    def cull(self, max_keyframes: int, max_points: int) -> int:
+        """Bound the map: keyframes beyond the window (with their points) and the oldest excess points."""
+        removed = 0
+        while len(self.keyframes) > max_keyframes:
             oldest = min(self.keyframes)
             removed += self.remove_points(self.host == oldest)
+            keep_geo = self.geo_host != oldest
+            self.geo_points_w, self.geo_host = self.geo_points_w[keep_geo], self.geo_host[keep_geo]
             del self.keyframes[oldest]
-        excess = len(self) - config.max_points
+        excess = len(self) - max_points
         if excess > 0:  # hosts are in insertion order, so the first points are the oldest
             mask = np.zeros(len(self), dtype=bool)
             mask[np.argsort(self.host, kind="stable")[:excess]] = True
             removed += self.remove_points(mask)
-        for kid in [k for k, kf in self.keyframes.items() if kf.n_points == 0 and k != max(self.keyframes)]:
-            del self.keyframes[kid]
         return removed
 
-    def project(self, T_c_w: np.ndarray, camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels (N, 2) of all points in a pinhole camera and a mask of points in front and inside."""
-        p_c = transform_points(T_c_w, self.points_w)
-        uv, front = camera.project(p_c)
-        return uv, front & camera.in_image(uv)
+    def snapshot(self, snapshot_id: int, n_reference: int, healthy_reference: int) -> MapSnapshot:
+        """An immutable copy for tracking."""
+        kfs = tuple(self.keyframes[k] for k in sorted(self.keyframes))
+        return MapSnapshot(snapshot_id, self.points_w.copy(), self.patches.copy(), self.host_depth.copy(),
+                           self.host.copy(), self.geo_points_w.copy(), kfs, int(n_reference), int(healthy_reference))
 
 
 @dataclass
@@ -199,4 +231,5 @@ class TemporaryEventMap:
         return len(self.points_w)
 
 
-__all__ = ["Keyframe", "PointMap", "TemporaryEventMap", "extract_patches", "smoothed_depth", "valid_depth_mask"]
+__all__ = ["Keyframe", "MapSnapshot", "PointMap", "TemporaryEventMap", "extract_patches", "smoothed_depth",
+           "valid_depth_mask"]

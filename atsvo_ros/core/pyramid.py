@@ -1,9 +1,10 @@
-"""Image pyramids for coarse-to-fine alignment."""
+"""Image pyramids (with gradients) for coarse-to-fine alignment."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
+from atsvo_ros.core import _pyramid_kernels as kern
 from atsvo_ros.core.camera import CameraModel
 
 
@@ -39,3 +40,11 @@ def image_gradients(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     gx[:, 1:-1] = 0.5 * (img[:, 2:] - img[:, :-2])
     gy[1:-1, :] = 0.5 * (img[2:, :] - img[:-2, :])
     return gx, gy
+
+
+def image_pyramid_with_gradients(pyramid: list[np.ndarray]) -> list[np.ndarray]:
+    """Stack each level with its central-difference gradients: (H, W, 3) float32 ``[I, Ix, Iy]``.
+
+    One array per level keeps the three values a residual reads next to each other in memory.
+    """
+    return [kern._gradient_stack(np.ascontiguousarray(img, dtype=np.float32)) for img in pyramid]

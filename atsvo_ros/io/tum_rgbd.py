@@ -322,25 +322,29 @@ class TumSource:
         notes.append(f"TUM folder: {self.reader.summary()}; cameras and extrinsics from the configuration")
         if not np.isclose(config.rig.depth_scale_m, TUM_DEPTH_SCALE_M, rtol=1e-9):
             notes.append(f"rig.depth_scale_m = {config.rig.depth_scale_m} differs from TUM's 1/5000 m")
+        self._rig = config.rig
         return config, config.rgb_camera.model(), config.event_camera.model()
 
-    def feed(self, assembler: Any, use_events: bool, gt: list | None) -> Iterator[None]:
-        """Generator: one colour image or depth map into ``assembler`` per step (ground truth into ``gt``)."""
+    def feed(self, sink: Any, roles: tuple[str, ...], gt: list | None) -> Iterator[None]:
+        """Generator: one colour image or depth map into ``sink`` per step (ground truth into ``gt``)."""
         from atsvo_ros.io.images import depth_to_metres
 
         if gt is not None and self.reader.has("ground_truth"):
             g = self.reader.ground_truth()
             gt.extend(zip(g.stamps_ns.tolist(), g.T_w_b))
-        rig = assembler.rig
+        rig = self._rig
         for fr in self.reader.frames():
-            assembler.add_rgb(fr.stamp_ns, fr.rgb)
+            sink.add_rgb(fr.stamp_ns, fr.rgb)
             yield
-            assembler.add_depth(fr.stamp_ns, depth_to_metres(fr.depth_raw, rig.depth_scale_m, rig.depth_min_m,
-                                                             rig.depth_max_m))
+            sink.add_depth(fr.stamp_ns, depth_to_metres(fr.depth_raw, rig.depth_scale_m, rig.depth_min_m,
+                                                        rig.depth_max_m))
             yield
 
     def decoder_stats(self) -> dict[str, Any]:
         return {}
+
+    def read_problems(self) -> tuple[dict[str, Any] | None, list[str]]:
+        return None, []
 
 
 __all__ = ["DEFAULT_MAX_DIFF_S", "TUM_DEPTH_SCALE_M", "TumEntry", "TumFrame", "TumPair", "TumRgbdReader",

@@ -34,7 +34,7 @@ from tf2_ros import TransformBroadcaster
 from atsvo_ros.config import AtsvoConfig, config_from_dict, flatten
 from atsvo_ros.errors import AtsvoError
 from atsvo_ros.io.ros_out import MsgClasses, odometry_msg, transform_msg
-from atsvo_ros.pipeline import TrackingPipeline
+from atsvo_ros.runtime import OdometryRuntime
 
 _CLASSES = MsgClasses(Time, Header, Odometry, PoseWithCovariance, Pose, Point, Quaternion, TwistWithCovariance,
                       Twist, Vector3, TransformStamped, Transform)
@@ -63,7 +63,7 @@ class TrackingNode(Node):
         self.publish_tf = bool(self.get_parameter("publish_tf").value)
         topics = self.config.topics
 
-        self.pipeline = TrackingPipeline(self.config, logger=self._log)
+        self.pipeline = OdometryRuntime(self.config, logger=self._log)
         self.odom_pub = self.create_publisher(Odometry, topics.odometry, 10)
         self.tf_broadcaster = TransformBroadcaster(self) if self.publish_tf else None
 
@@ -86,16 +86,15 @@ class TrackingNode(Node):
         getattr(self.get_logger(), level)(text)
 
     def _on_events(self, msg: bytes) -> None:
-        self.pipeline.on_events(msg, self.event_msgtype)
+        self.pipeline.add_event_msg(msg, self.event_msgtype, self.config.topics.events)
 
     def _on_rgbd(self, rgb: Image, depth: Image) -> None:
-        try:
-            out = self.pipeline.on_rgbd(rgb, depth)
-        except AtsvoError as exc:  # the pipeline already counts; keep the node alive
-            self.get_logger().error(f"frame dropped: {exc}", throttle_duration_sec=2.0)
-            return
-        if out is None:
-            return
+        self.pipeline.add_rgb_msg(rgb, self.config.topics.rgb)
+        self.pipeline.add_depth_msg(depth, self.config.topics.depth)
+        for out in self.pipeline.poll():
+            self._publish(out)
+
+    def _publish(self, out) -> None:
         topics = self.config.topics
         self.odom_pub.publish(odometry_msg(_CLASSES, out.result.stamp_ns, out.result.T_odom_base,
                                            out.result.covariance, out.twist, topics.odom_frame, topics.base_frame))

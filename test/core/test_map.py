@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from atsvo_ros.config import MappingConfig, RigConfig
+from atsvo_ros.config import RigConfig
 from atsvo_ros.core.geometry import se3_exp, transform_points
 from atsvo_ros.core.map import PointMap, TemporaryEventMap, extract_patches, smoothed_depth, valid_depth_mask
 from atsvo_ros.core.photometric import ATS_PATTERN, RGB_PATTERN, bilinear, level_position
@@ -66,43 +66,43 @@ def test_patches_hold_pattern_intensities_on_every_level():
 def _add(m: PointMap, n: int, T=None):
     p = np.column_stack([np.zeros(n), np.zeros(n), np.full(n, 2.0)])
     T = np.eye(4) if T is None else T
-    return m.add_keyframe(len(m.keyframes), T, (0.0, 0.0), p, np.zeros((2, n, 9), np.float32))
+    return m.add_keyframe(len(m.keyframes), T, (0.0, 0.0), p, np.zeros((2, n, 9), np.float32), p[: n // 2])
 
 
 def test_point_map_stores_world_points_and_hosts():
     m = PointMap(2, 9)
     T = se3_exp(np.array([1.0, 0.0, 0.0, 0.0, 0.3, 0.0]))
-    kf = _add(m, 5, T)
-    assert len(m) == 5 and kf.n_points == 5 and m.last_keyframe is kf
+    kf = _add(m, 6, T)
+    assert len(m) == 6 and len(m.geo_points_w) == 3 and np.all(m.host == kf.kf_id)
     assert np.allclose(m.points_w, transform_points(T, np.array([[0.0, 0.0, 2.0]])))
+    assert np.allclose(m.geo_points_w, m.points_w[:3])
     with pytest.raises(TrackingError):
         m.add_keyframe(1, np.eye(4), (0, 0), np.ones((2, 3)), np.zeros((2, 3, 9), np.float32))
     with pytest.raises(TrackingError):
         m.add_keyframe(1, np.eye(4), (0, 0), -np.ones((1, 3)), np.zeros((2, 1, 9), np.float32))
+    with pytest.raises(TrackingError):  # geometric points behind the camera
+        m.add_keyframe(1, np.eye(4), (0, 0), np.ones((1, 3)), np.zeros((2, 1, 9), np.float32), -np.ones((1, 3)))
 
 
 def test_culling_bounds_memory_over_many_keyframes():
-    cfg = MappingConfig(max_keyframes=4, max_points=1000, max_outlier_frames=3)
     m = PointMap(2, 9)
     for _ in range(50):
         _add(m, 400)
-        m.cull(cfg)
-        assert len(m) <= 1000 and len(m.keyframes) <= 4
-        assert m.patches.shape[1] == len(m) == len(m.host) == len(m.outlier_run)
+        m.cull(max_keyframes=4, max_points=1000)
+        assert len(m) <= 1000 and len(m.keyframes) <= 4 and len(m.geo_points_w) <= 4 * 200
+        assert m.patches.shape[1] == len(m) == len(m.host) == len(m.host_depth)
     assert m.host.min() >= 47  # only the newest keyframes survive
 
 
-def test_repeated_outliers_are_culled():
-    cfg = MappingConfig(max_outlier_frames=3)
+def test_snapshots_are_immutable_copies():
     m = PointMap(2, 9)
     _add(m, 4)
-    states = np.array([1, 2, 2, 0], dtype=np.int8)
-    for _ in range(2):
-        m.update_observations(states)
-    m.update_observations(np.array([1, 1, 2, 0], dtype=np.int8))  # point 1 recovered
-    assert m.cull(cfg) == 1 and len(m) == 3
-    with pytest.raises(TrackingError):
-        m.update_observations(np.zeros(7, np.int8))
+    snap = m.snapshot(3, 4, 9)
+    assert snap.snapshot_id == 3 and len(snap) == 4 and len(snap.keyframes) == 1
+    with pytest.raises(ValueError):
+        snap.points_w[0, 0] = 1.0
+    _add(m, 4)
+    assert len(snap) == 4 and len(m) == 8  # mapping goes on; the snapshot tracking holds does not change
 
 
 def test_temporary_event_map_container():

@@ -5,14 +5,15 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import RgbSelectionConfig, TrackerConfig
-from atsvo_ros.core import _track_kernels as kernels
+from atsvo_ros.core import _lm_kernels as kernels
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.geometry import se3_exp, se3_inv, se3_log
 from atsvo_ros.core.map import extract_patches
 from atsvo_ros.core.photometric import ATS_PATTERN, RGB_PATTERN
-from atsvo_ros.core.pyramid import build_pyramid, pyramid_cameras
+from atsvo_ros.core.pyramid import build_pyramid, image_pyramid_with_gradients, pyramid_cameras
+from atsvo_ros.core.residuals.photometric import PhotometricBlock
 from atsvo_ros.core.selection.rgb import select_rgb_pixels
-from atsvo_ros.core.tracker import ResidualBlock, Tracker, image_pyramid_with_gradients
+from atsvo_ros.core.tracker import Tracker
 from atsvo_ros.errors import TrackingError
 from test.core.render_helpers import BoxRoom
 
@@ -39,7 +40,7 @@ def _block(room, T_w_c, points_w, patches, camera=CAM, T_cam_rgb=None, pattern=R
     T_cam_rgb = np.eye(4) if T_cam_rgb is None else T_cam_rgb
     img, _ = room.render(camera, T_w_c @ se3_inv(T_cam_rgb), supersample=3)
     pyr = image_pyramid_with_gradients(build_pyramid(img, LEVELS))
-    return ResidualBlock(name, points_w, patches, pattern, pyr, pyramid_cameras(camera, LEVELS), T_cam_rgb=T_cam_rgb)
+    return PhotometricBlock(name, points_w, patches, pattern, pyr, pyramid_cameras(camera, LEVELS), T_cam_rgb=T_cam_rgb)
 
 
 def _errors(T_est_c_w, T_w_c):
@@ -101,17 +102,19 @@ def test_normal_equations_match_finite_differences(zero_mean):
     p = CAM.backproject(uv, rng.uniform(1.0, 4.0, 200))
     patches = rng.uniform(0, 200, (1, 200, 9)).astype(np.float32)
     T_cam_rgb = se3_exp(np.array([0.05, -0.02, 0.01, 0.01, 0.03, -0.02]))
-    blk = ResidualBlock("rgb", p, patches, RGB_PATTERN, pyr, [CAM], T_cam_rgb=se3_inv(T_cam_rgb), zero_mean=zero_mean)
+    blk = PhotometricBlock("rgb", p, patches, RGB_PATTERN, pyr, [CAM], T_cam_rgb=se3_inv(T_cam_rgb),
+                           zero_mean=zero_mean, huber=1e6, outlier=1e6)
     T0 = se3_exp(np.array([0.01, 0.02, -0.01, 0.01, 0.02, 0.003]))
     aff = (0.1, 3.0)
-    H, g, _, n_in, n_vis, _ = blk.linearise(0, T0, aff, huber=1e6, outlier_thr=1e6)
+    bs = blk.linearise(0, T0, aff)
+    H, g, n_in, n_vis = bs.H, bs.g, bs.n_inliers, bs.n_visible
     assert n_in == n_vis > 150
     num = np.zeros(8)
     for k in range(8):
         d = np.zeros(8)
         d[k] = 1e-6
-        ep = blk.linearise(0, se3_exp(d[:6]) @ T0, (aff[0] + d[6], aff[1] + d[7]), 1e6, 1e6)[2]
-        em = blk.linearise(0, se3_exp(-d[:6]) @ T0, (aff[0] - d[6], aff[1] - d[7]), 1e6, 1e6)[2]
+        ep = blk.linearise(0, se3_exp(d[:6]) @ T0, (aff[0] + d[6], aff[1] + d[7])).energy
+        em = blk.linearise(0, se3_exp(-d[:6]) @ T0, (aff[0] - d[6], aff[1] - d[7])).energy
         num[k] = (ep - em) / 2e-6
     # Raw patches: the Jacobian's interpolated central-difference gradient and the slope of the bilinear
     # interpolant differ by (1 - 2 frac) x the curvature (exact only on a linear ramp), ~3e-5 relative here;
@@ -151,7 +154,7 @@ def test_second_block_with_its_own_camera_and_extrinsic(room, reference):
 
 def test_rejects_inconsistent_input():
     with pytest.raises(TrackingError):
-        ResidualBlock("rgb", np.zeros((3, 3)), np.zeros((2, 4, 9), np.float32), RGB_PATTERN, [], [])
+        PhotometricBlock("rgb", np.zeros((3, 3)), np.zeros((2, 4, 9), np.float32), RGB_PATTERN, [], [])
     with pytest.raises(TrackingError):
         Tracker(TrackerConfig()).track([], [np.eye(4)])
 
@@ -176,8 +179,8 @@ def test_covariance_matches_the_spread_of_errors(room):
         T_w_c = se3_exp(rng.normal(0.0, [0.01, 0.01, 0.01, 0.005, 0.005, 0.005]))
         cur, _ = room.render(cam, T_w_c, supersample=3)
         cur = cur + rng.normal(0.0, 3.0, cur.shape).astype(np.float32)
-        blk = ResidualBlock("rgb", p_c, patches, RGB_PATTERN, image_pyramid_with_gradients(build_pyramid(cur, LEVELS)),
-                            pyramid_cameras(cam, LEVELS), zero_mean=True)
+        pyr = image_pyramid_with_gradients(build_pyramid(cur, LEVELS))
+        blk = PhotometricBlock("rgb", p_c, patches, RGB_PATTERN, pyr, pyramid_cameras(cam, LEVELS), zero_mean=True)
         res = Tracker(TrackerConfig()).track([blk], [np.eye(4)])
         e = se3_log(res.T_rgb_w @ T_w_c)  # left perturbation of T_rgb_w, like the covariance
         eps.append(e)
@@ -199,7 +202,7 @@ def test_singular_system_is_reported_not_hidden():
     rng = np.random.default_rng(0)
     p = CAM.backproject(np.column_stack([rng.uniform(50, 590, 100), rng.uniform(50, 430, 100)]), 2.0)
     patches = rng.uniform(50, 150, (LEVELS, 100, 9)).astype(np.float32)
-    blk = ResidualBlock("rgb", p, patches, RGB_PATTERN, flat, pyramid_cameras(CAM, LEVELS), zero_mean=True)
+    blk = PhotometricBlock("rgb", p, patches, RGB_PATTERN, flat, pyramid_cameras(CAM, LEVELS), zero_mean=True)
     res = Tracker(TrackerConfig()).track([blk], [np.eye(4)])
     assert res.singular and not res.converged
     assert np.allclose(res.T_rgb_w, np.eye(4))

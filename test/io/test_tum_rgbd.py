@@ -92,11 +92,12 @@ def test_reader_pairs_streams_and_scales_depth(synth):
     assert np.abs(f.depth_raw * (1 / 5000) - frames[2][2]).max() <= 1e-4 + 1e-6  # 0.2 mm units
     assert np.allclose(gt.T_w_b, np.stack([fr[3] for fr in frames]), atol=1e-7)
     # the replay source hands metres to the assembler, at the colour stamp, with the rig's range check
-    rig = load_config("tum_fr1", overrides={"rig.depth_max_m": 3.5}).rig
-    asm = FrameAssembler(rig, with_events=False)
+    cfg = load_config("tum_fr1", overrides={"rig.depth_max_m": 3.5})
+    asm = FrameAssembler(cfg.rig, with_events=False)
     src = TumSource(folder)
+    src.setup(cfg, [])
     gt_samples: list = []
-    for _ in src.feed(asm, False, gt_samples):
+    for _ in src.feed(asm, ("rgb", "depth"), gt_samples):
         pass
     pairs = asm.flush()
     assert len(pairs) == 8 and asm.stats.dropped_rgb == asm.stats.dropped_depth == 0
@@ -113,8 +114,11 @@ def test_zero_depth_stays_invalid(tmp_path):
     frames = render_frames(load_config("tum_fr3").rgb_camera.model(), n=1)
     frames[0][2][:40] = 0.0
     folder = write_tum_folder(tmp_path / "fr3_holes", frames, gt=False)
-    asm = FrameAssembler(load_config("tum_fr3").rig, with_events=False)
-    for _ in TumSource(folder).feed(asm, False, None):
+    cfg = load_config("tum_fr3")
+    asm = FrameAssembler(cfg.rig, with_events=False)
+    src = TumSource(folder)
+    src.setup(cfg, [])
+    for _ in src.feed(asm, ("rgb", "depth"), None):
         pass
     (fr, _), = asm.flush()
     assert np.all(fr.depth_m[:40] == 0.0) and np.all(fr.depth_m[40:] > 3.0)

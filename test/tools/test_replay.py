@@ -6,12 +6,12 @@ replay's plumbing: streaming, pairing, event cutting, outputs, metrics, determin
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
+from atsvo_ros.core.frame import OdometryResult, TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.io.trajectory import read_tum
 from atsvo_ros.tools import replay as replay_mod
@@ -19,20 +19,6 @@ from atsvo_ros.tools.replay import main, replay
 from test.io.test_bags import gt_pose, write_bag
 
 T0 = 1_700_000_000_000_000_000
-
-
-@dataclass(frozen=True)
-class _Result:
-    stamp_ns: int
-    T_odom_base: np.ndarray
-    T_odom_camera: np.ndarray
-    covariance: np.ndarray
-    status: str
-    mode: str
-    tracking_time_s: float
-    n_points: int
-    n_inliers: int
-    keyframe_inserted: bool
 
 
 class FakeOdometry:
@@ -46,17 +32,21 @@ class FakeOdometry:
         self.camera = rgb_camera
         self.event_camera = event_camera
         self.events = []
+        self.imu = []
         self.frames = []
         FakeOdometry.instances.append(self)
 
     def add_events(self, batch):
         self.events.append(batch)
 
+    def add_imu(self, batch):
+        self.imu.append(batch)
+
     def process_frame(self, frame):
         self.frames.append(frame)
         T = se3_inv(gt_pose(0.0)) @ gt_pose((frame.stamp_ns - T0) * 1e-9)
-        return _Result(frame.stamp_ns, T, T @ self.T_base_rgb, np.eye(6), "ok",
-                       "fused" if self.event_camera is not None else "rgbd", 0.001, 100, 90, False)
+        return OdometryResult(frame.stamp_ns, T, T @ self.T_base_rgb, np.eye(6), TrackingStatus.OK,
+                              "fused" if self.event_camera is not None else "rgbd", 0.001, 100, 90, False)
 
 
 @pytest.fixture()
@@ -143,7 +133,8 @@ def test_user_errors_exit_1_with_one_line(tmp_path, capsys, monkeypatch, fake):
     assert "no depth topic" in _one_line_error(capsys)
     bayer = write_bag(tmp_path / "bayer", "sqlite3", n_frames=2, rgb_encoding="bayer_rggb8")
     assert main([str(bayer), "--out", out, "--no-progress"]) == 1
-    assert "bayer_rggb8" in _one_line_error(capsys)
+    err = _one_line_error(capsys)  # the undecodable images are named in the one line, with topic and stamp
+    assert "bayer_rggb8" in err and "/camera/camera/color/image_raw" in err
     corrupt = tmp_path / "corrupt.bag"
     corrupt.write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 8)
     assert main([str(corrupt), "--out", out, "--no-progress"]) == 1

@@ -57,11 +57,11 @@ def test_replay_tracks_the_synthetic_sequence(sim_runs):
 
 
 def test_imu_extrinsic_is_read_from_tf_static(sim_runs):
-    from atsvo_ros.tools.replay import _BagSource
+    from atsvo_ros.io.sources import BagSource
 
     bag, _, _ = sim_runs["mcap"]
     config = load_config("synthetic", overrides={"rig.T_rgb_imu": np.eye(4).reshape(-1).tolist()})
-    source = _BagSource([bag], None, config)
+    source = BagSource([bag], None, config)
     try:
         notes: list[str] = []
         config, _, _ = source.setup(config, notes)

@@ -1,7 +1,4 @@
-"""numba kernels of the tracker: residuals, Jacobians and normal equations of one residual block.
-
-Private: call them through :class:`atsvo_ros.core.tracker.ResidualBlock`.
-"""
+"""numba kernels of the photometric residual block; private, see :mod:`.photometric`."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,20 +10,67 @@ INLIER = 1
 OUTLIER = 2
 
 
+@njit(cache=True, inline="always")
+def _at_row_time(px, py, pz, qx, qy, qz, R, vel, dt):  # pragma: no cover - compiled
+    """Rolling shutter: where a point is in the block camera ``dt`` seconds after the frame's reference time.
+
+    ``vel`` = (rho, omega) is the camera's twist per second (``T_rw(t + dt) = exp(dt vel) T_rw(t)``), so the
+    point, ``p`` in the RGB frame, moves by ``dt (rho + omega x p)``, rotated into the block camera by ``R``.
+    """
+    vx = vel[0] + vel[4] * pz - vel[5] * py
+    vy = vel[1] + vel[5] * px - vel[3] * pz
+    vz = vel[2] + vel[3] * py - vel[4] * px
+    return (qx + dt * (R[0, 0] * vx + R[0, 1] * vy + R[0, 2] * vz),
+            qy + dt * (R[1, 0] * vx + R[1, 1] * vy + R[1, 2] * vz),
+            qz + dt * (R[2, 0] * vx + R[2, 1] * vy + R[2, 2] * vz))
+
+
+@njit(cache=True, inline="always")
+def _zncc(a, b):  # pragma: no cover - compiled
+    """Zero-mean normalised cross-correlation of two patches (NaN when one has no contrast)."""
+    n = a.shape[0]
+    ma = 0.0
+    mb = 0.0
+    for k in range(n):
+        ma += a[k]
+        mb += b[k]
+    ma /= n
+    mb /= n
+    sab = 0.0
+    saa = 0.0
+    sbb = 0.0
+    for k in range(n):
+        da = a[k] - ma
+        db = b[k] - mb
+        sab += da * db
+        saa += da * da
+        sbb += db * db
+    den = np.sqrt(saa * sbb)
+    return sab / den if den > 1e-9 else np.nan
+
+
 @njit(cache=True)
 def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, offset, huber, outlier_thr,
-               border, grad_c2, zero_mean, zref, max_scale, H, g, state):  # pragma: no cover - compiled
+               border, grad_c2, zero_mean, zref, max_scale, vel, rs_t0, rs_line, H, g, state,
+               zncc, want_zncc):  # pragma: no cover - compiled
     """Gauss-Newton system of the patch residuals ``r = I(pi(T_cr T_rw p) + o) - (gain z + offset)``.
 
     Parameters are ``(xi, a, b)``: a left perturbation ``xi`` of ``T_rw`` (twist, translation first),
     the log-gain ``a`` (gain = e^a) and offset ``b``. Fills ``H`` (8x8), ``g`` (8) with the
     Huber-weighted ``J^T W J`` and ``J^T W r``, and ``state`` per point. Pixels are further weighted
     by ``c^2 / (c^2 + |grad I|^2)`` (``grad_c2`` = c^2, 0 = off), DSO's guard against edges whose
-    sub-pixel blur and occlusions make them unreliable. With ``zero_mean`` each patch's mean is
+    sub-pixel blur and occlusions make them unreliable; ``grad I`` is the image gradient itself, not
+    the mean-removed one (which is small on an edge and would hardly down-weight it). With ``zero_mean``
+    each patch's mean is
     removed from the residuals (and Jacobians): brightness that varies slowly over the image
     (vignetting, uneven light), which one global gain cannot model, then cancels. With
     ``max_scale > 1`` a point whose depth differs from its depth in the host keyframe (``zref``)
-    by more than that factor is skipped: its stored patch shows the scene at another scale. Returns
+    by more than that factor is skipped: its stored patch shows the scene at another scale. With a rolling
+    shutter (``rs_t0``, ``rs_line`` not 0) each point is moved to the time its row was exposed,
+    ``rs_t0 + rs_line v`` seconds from the frame's stamp, with the camera twist ``vel`` (per second); the
+    Jacobian ignores how that time depends on the pose. With ``want_zncc``, ``zncc`` receives each visible
+    point's zero-mean normalised cross-correlation of stored and current patch (NaN otherwise), for the
+    consistency checks. Returns
     ``(energy, n_inliers, n_visible, sum of inlier squared residuals)``. Outliers add a constant
     energy (the Huber cost of a patch at the threshold) and invisible points none, so the energy
     per visible point compares estimates fairly (as DSO's coarse tracker does).
@@ -49,6 +93,8 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
     n_in = 0
     n_vis = 0
     res = np.empty(npat)
+    g2s = np.empty(npat)
+    ivs = np.empty(npat)
     gxs = np.empty(npat)
     gys = np.empty(npat)
     zs = np.empty(npat)
@@ -66,12 +112,21 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
         qx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + T_cr[0, 3]
         qy = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + T_cr[1, 3]
         qz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + T_cr[2, 3]
+        zncc[i] = np.nan
         if qz < 1e-3 or (max_scale > 1.0 and (qz > max_scale * zref[i] or qz * max_scale < zref[i])):
             state[i] = INVISIBLE
             continue
         iz = 1.0 / qz
         u = fx * qx * iz + cx
         v = fy * qy * iz + cy
+        if rs_line != 0.0 or rs_t0 != 0.0:
+            qx, qy, qz = _at_row_time(px, py, pz, qx, qy, qz, R, vel, rs_t0 + rs_line * v)
+            if qz < 1e-3:
+                state[i] = INVISIBLE
+                continue
+            iz = 1.0 / qz
+            u = fx * qx * iz + cx
+            v = fy * qy * iz + cy
         if not (u >= border and v >= border and u <= w - 1 - border and v <= h - 1 - border):
             state[i] = INVISIBLE
             continue
@@ -94,10 +149,14 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
                       + w10 * img[y0 + 1, x0, 1] + w11 * img[y0 + 1, x0 + 1, 1])
             gys[k] = (w00 * img[y0, x0, 2] + w01 * img[y0, x0 + 1, 2]
                       + w10 * img[y0 + 1, x0, 2] + w11 * img[y0 + 1, x0 + 1, 2])
+            g2s[k] = gxs[k] * gxs[k] + gys[k] * gys[k]  # before any mean removal: the edge weight
+            ivs[k] = iv
             zs[k] = patches[i, k]
             r = iv - (gain * zs[k] + offset)
             res[k] = r
             sse += r * r
+        if want_zncc:
+            zncc[i] = _zncc(ivs, zs)
         if zero_mean:
             mr = 0.0
             mgx = 0.0
@@ -176,7 +235,7 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
             gx = gxs[k]
             gy = gys[k]
             if grad_c2 > 0.0:
-                wt *= grad_c2 / (grad_c2 + gx * gx + gy * gy)
+                wt *= grad_c2 / (grad_c2 + g2s[k])
             ja = -gain * zs[k]
             sxx += wt * gx * gx
             sxy += wt * gx * gy
@@ -213,108 +272,3 @@ def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, o
         for c in range(r8):
             H[r8, c] = H[c, r8]
     return energy, n_in, n_vis, sse_in
-
-
-@njit(cache=True)
-def _gradient_stack(img):  # pragma: no cover - compiled
-    """(H, W, 3) float32 ``[I, dI/dx, dI/dy]`` with central differences (0 on the border)."""
-    h, w = img.shape
-    out = np.empty((h, w, 3), dtype=np.float32)
-    for y in range(h):
-        ym = y - 1 if y > 0 else y
-        yp = y + 1 if y < h - 1 else y
-        inner_y = 0 < y < h - 1
-        for x in range(w):
-            out[y, x, 0] = img[y, x]
-            if 0 < x < w - 1:
-                out[y, x, 1] = 0.5 * (img[y, x + 1] - img[y, x - 1])
-            else:
-                out[y, x, 1] = 0.0
-            out[y, x, 2] = 0.5 * (img[yp, x] - img[ym, x]) if inner_y else 0.0
-    return out
-
-
-@njit("float64[::1](float64[:, ::1], float64[::1], float64[:, ::1])", cache=True)
-def _solve_spd(A, b, L):  # pragma: no cover - compiled
-    """Solve ``A x = b`` for a small symmetric positive-definite ``A`` by Cholesky (``L`` is scratch).
-
-    Hand-written rather than ``np.linalg.solve``: numba's LAPACK bindings need SciPy at run time, and
-    for the 6x6-10x10 systems of the tracker this is faster anyway (~2.5 us vs ~3.9 us per call, same
-    result to 1e-17). Returns NaN in every entry when ``A`` is not numerically positive definite (a
-    pivot below 1e-12 of the largest diagonal entry): the caller sees a singular system explicitly.
-    """
-    n = A.shape[0]
-    x = np.empty(n)
-    scale = 0.0
-    for i in range(n):
-        scale = max(scale, abs(A[i, i]))
-    tiny = 1e-12 * scale if scale > 0.0 else 1e-300
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > tiny:  # also catches NaN
-            x[:] = np.nan
-            return x
-        d = np.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / d
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * x[k]
-        x[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):
-        s = x[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-    return x
-
-
-@njit("Tuple((float64[::1], float64[:, ::1]))(float64[:, ::1], float64[::1], float64, float64[:, ::1])",
-      cache=True)
-def _lm_step(H, g, lam, T):  # pragma: no cover - compiled
-    """Damped Gauss-Newton step ``(H + lam diag H) delta = -g`` and ``exp(delta[:6]) @ T``.
-
-    Returns ``(delta, T_new)``; every entry of ``delta`` is NaN when the damped system is singular
-    (then ``T_new`` is ``T``).
-    """
-    n = H.shape[0]
-    A = H.copy()
-    for i in range(n):
-        A[i, i] += lam * H[i, i]  # no absolute regularisation: a direction without information is singular
-    delta = _solve_spd(A, -g, np.zeros((n, n)))
-    if not np.isfinite(delta[0]):
-        return delta, T.copy()
-    rho = delta[:3]
-    wx, wy, wz = delta[3], delta[4], delta[5]
-    th2 = wx * wx + wy * wy + wz * wz
-    if th2 < 1e-12:
-        a = 1.0 - th2 / 6.0
-        b = 0.5 - th2 / 24.0
-        c = 1.0 / 6.0 - th2 / 120.0
-    else:
-        th = np.sqrt(th2)
-        a = np.sin(th) / th
-        b = (1.0 - np.cos(th)) / th2
-        c = (th - np.sin(th)) / (th2 * th)
-    # exp of the twist: R = I + a W + b W^2, t = (I + b W + c W^2) rho; written out, because numba's
-    # matrix product (np.dot / @) also needs SciPy's BLAS.
-    W = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
-    E = np.eye(4)
-    for i in range(3):
-        for j in range(3):
-            w2 = W[i, 0] * W[0, j] + W[i, 1] * W[1, j] + W[i, 2] * W[2, j]
-            E[i, j] += a * W[i, j] + b * w2
-            v = (1.0 if i == j else 0.0) + b * W[i, j] + c * w2
-            E[i, 3] += v * rho[j]
-    out = np.empty((4, 4))
-    for i in range(4):
-        for j in range(4):
-            out[i, j] = E[i, 0] * T[0, j] + E[i, 1] * T[1, j] + E[i, 2] * T[2, j] + E[i, 3] * T[3, j]
-    return delta, out

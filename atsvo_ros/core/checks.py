@@ -1,0 +1,76 @@
+"""Consistency checks: is a tracked pose supported by the data? (ok, degraded or lost, and why)
+
+A direct method always returns *some* optimum; on blur, repetitive or smooth texture it can be a
+wrong one that still has many "inliers" and a healthy-looking covariance. These checks judge each
+residual term apart and look for what a wrong pose leaves behind:
+
+* lost: no estimate, a singular system, too few photometric inliers, degenerate geometry (a
+  position standard deviation above ``max_position_std_m``), a brightness-gain jump no camera makes
+  in one frame, a pose jump larger than ``max_step_m`` / ``max_step_rot_deg``, or patches that do not
+  correlate with the image at all (mean ZNCC below ``lost_zncc``);
+* degraded: tracked, but the inlier patches correlate poorly with the image (mean ZNCC below
+  ``min_zncc``: they landed on other texture), or the depth term rejects most of its points (the
+  photometric optimum disagrees with the scene's geometry).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.core.geometry import relative_motion, se3_inv
+from atsvo_ros.core.tracker import TrackResult
+
+OK, DEGRADED, LOST = "ok", "degraded", "lost"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What the checks concluded: ``level`` is ok, degraded or lost; ``reason`` says why (None when ok)."""
+
+    level: str
+    reason: str | None = None
+
+    @classmethod
+    def lost(cls, reason: str) -> Verdict:
+        return cls(LOST, reason)
+
+    @property
+    def ok(self) -> bool:
+        return self.level == OK
+
+
+def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: np.ndarray,
+          affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: float) -> Verdict:
+    """Apply the checks of the module docstring to one tracking result."""
+    cfg = config.tracker
+    if not res.ok:
+        return Verdict.lost("no estimate (NaN in the pose or its covariance)")
+    if res.singular:
+        return Verdict.lost("singular normal equations (no texture or depth structure constrains the pose)")
+    rgb = res.blocks.get("rgb")
+    if rgb is not None and rgb.n_inliers < max(cfg.min_inliers, cfg.min_inlier_fraction * rgb.n_visible):
+        return Verdict.lost(f"{rgb.n_inliers} photometric inliers of {rgb.n_visible} visible map points")
+    std = float(np.sqrt(max(np.linalg.eigvalsh(res.covariance[:3, :3]).max(), 0.0)))
+    if std > cfg.max_position_std_m:
+        return Verdict.lost(f"degenerate geometry (position std {std:.3f} m)")
+    jump = affine_after[0] - affine_before[0]
+    if abs(jump) > np.log(cfg.max_gain_ratio):
+        return Verdict.lost(f"brightness gain jumped by x{np.exp(jump):.2f}")
+    rot, trans = relative_motion(se3_inv(reference), se3_inv(T_c_w))
+    if trans > cfg.max_step_m or np.degrees(rot) > cfg.max_step_rot_deg:
+        return Verdict.lost(f"jump of {trans:.3f} m / {np.degrees(rot):.1f} deg in one frame")
+    if np.isfinite(zncc) and zncc < cfg.lost_zncc:
+        return Verdict.lost(f"patches do not match the image (mean ZNCC {zncc:.2f})")
+    if np.isfinite(zncc) and zncc < cfg.min_zncc:
+        return Verdict(DEGRADED, f"patches match the image poorly (mean ZNCC {zncc:.2f})")
+    depth = res.blocks.get("depth")
+    if (depth is not None and depth.n_visible >= cfg.min_inliers
+            and depth.inlier_fraction < cfg.min_depth_inlier_fraction):
+        return Verdict(DEGRADED, f"the depth term rejects {depth.n_visible - depth.n_inliers} of {depth.n_visible} "
+                                 "points (pose disagrees with the scene geometry)")
+    return Verdict(OK)
+
+
+__all__ = ["DEGRADED", "LOST", "OK", "Verdict", "judge"]

@@ -1,0 +1,98 @@
+"""Residual blocks of Eq. 4: each adds its normal equations in the RGB pose to one joint system.
+
+A block is anything with the :class:`ResidualBlock` interface: the photometric block (RGB image or
+ATS, :mod:`.photometric`) and the geometric block (point-to-plane on the depth image,
+:mod:`.geometric`). The optimiser (:mod:`atsvo_ros.core.tracker`) knows only this interface, so the
+event term of the fusion is another photometric block with its own camera, pattern and weights.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from atsvo_ros.core import _lm_kernels as lm
+
+
+@dataclass(frozen=True)
+class BlockSystem:
+    """One block's contribution at one level and one estimate.
+
+    ``H`` is 8x8 (pose twist, then the block's log-gain and offset) for a block that estimates a
+    brightness model, 6x6 otherwise; ``energy`` is the robust cost (outliers at a constant),
+    ``sse`` the sum of squared inlier residuals in the block's noise units, ``n_residuals`` how
+    many scalar residuals the inliers contributed.
+    """
+
+    H: np.ndarray
+    g: np.ndarray
+    energy: float
+    n_inliers: int
+    n_visible: int
+    n_residuals: int
+    sse: float
+
+
+@dataclass(frozen=True)
+class RollingShutter:
+    """Row timing of a rolling-shutter image, for residuals that move each point to its row's exposure time.
+
+    Row ``v`` (level 0) is exposed ``t0_s + line_s v`` seconds after the frame's stamp; the camera
+    velocity over the frame is that of the current estimate relative to the previous frame's pose
+    ``T_prev_c_w``, ``dt_s`` earlier (a continuous-time model with one constant twist per frame).
+    """
+
+    t0_s: float
+    line_s: float
+    T_prev_c_w: np.ndarray
+    dt_s: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_T_prev", np.ascontiguousarray(self.T_prev_c_w, dtype=np.float64))
+
+    @classmethod
+    def centred(cls, readout_s: float, height_px: int, T_prev_c_w: np.ndarray, dt_s: float,
+                offset_s: float = 0.0) -> RollingShutter:
+        """Readout over ``readout_s`` with the stamp at the middle row plus ``offset_s``."""
+        return cls(offset_s - 0.5 * readout_s, readout_s / max(1, height_px), T_prev_c_w, dt_s)
+
+    def params(self, level: int, T_c_w: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """``(twist per second, t0, line time)`` for pixel rows of pyramid ``level`` at the estimate ``T_c_w``."""
+        vel = lm._twist_per_s(np.ascontiguousarray(T_c_w, dtype=np.float64), self._T_prev, float(self.dt_s))
+        s = float(2 ** level)
+        return np.ascontiguousarray(vel), self.t0_s + self.line_s * (0.5 * s - 0.5), self.line_s * s
+
+
+    def to_stamp(self, points_c: np.ndarray, rows_px: np.ndarray, T_c_w: np.ndarray) -> np.ndarray:
+        """Points seen at level-0 ``rows_px`` (camera frame at their row's time) in the camera frame at the stamp."""
+        vel, t0, line = self.params(0, T_c_w)
+        dt = (t0 + line * np.asarray(rows_px, dtype=np.float64))[:, None]
+        p = np.asarray(points_c, dtype=np.float64).reshape(-1, 3)
+        return p - dt * (vel[:3] + np.cross(vel[3:], p))
+
+
+NO_MOTION = np.zeros(6)
+
+
+class ResidualBlock(Protocol):
+    """What the tracker needs from a term of Eq. 4."""
+
+    name: str
+    estimate_affine: bool
+    state: np.ndarray  # per point: 0 invisible, 1 inlier, 2 outlier (after the last ``linearise`` at level 0)
+
+    @property
+    def n_levels(self) -> int: ...
+
+    def __len__(self) -> int: ...
+
+    def linearise(self, level: int, T_rgb_w: np.ndarray, affine: tuple[float, float],
+                  relax: float = 1.0) -> BlockSystem:
+        """Normal equations at ``level`` for the RGB pose ``T_rgb_w``; ``relax`` scales the outlier threshold."""
+        ...
+
+
+INVISIBLE, INLIER, OUTLIER = 0, 1, 2
+
+__all__ = ["INLIER", "INVISIBLE", "NO_MOTION", "OUTLIER", "BlockSystem", "ResidualBlock", "RollingShutter"]
