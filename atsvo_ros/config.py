@@ -140,7 +140,9 @@ class EventSelectionConfig:
 class TrackerConfig:
     """Coarse-to-fine photometric alignment (Eq. 4)."""
 
-    pyramid_levels: int = _f(4, 1, 8)
+    pyramid_levels: int = _f(5, 1, 8, doc="pyramid levels (fewer when the coarsest would be under 16 px): the "
+                             "coarsest sets the basin of convergence (5 at 640x480: 40x30 px, ~4x the rotation that "
+                             "4 levels take)")
     coarse_level_points: int = _f(300, 0, 100000,
                                   doc="map points used on level l > 0: max(this, N / 4^l), 0 = all (speed)")
     max_iterations: int = _f(20, 1, 200, doc="Gauss-Newton/LM iterations per pyramid level")
@@ -194,6 +196,9 @@ class TrackerConfig:
     lost_zncc: float = _f(0.2, -1.0, 1.0, doc="mean ZNCC below which the frame is lost")
     min_depth_inlier_fraction: float = _f(0.5, 0.0, 1.0, doc="depth-term inliers / visible below which the frame "
                                           "is degraded (the photometric optimum disagrees with the geometry)")
+    max_gyro_disagreement_deg: float = _f(2.0, 0.0, 180.0, lo_open=True,
+                                          doc="rotation between the estimate and the gyro's prediction beyond which "
+                                              "the frame is degraded (a wrong visual optimum)")
     degraded_covariance_scale: float = _f(100.0, 1.0, 1e12, doc="factor on the covariance of a degraded frame")
 
 

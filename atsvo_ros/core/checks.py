@@ -9,7 +9,8 @@ residual term apart and look for what a wrong pose leaves behind:
   in one frame, a pose jump larger than ``max_step_m`` / ``max_step_rot_deg``, or patches that do not
   correlate with the image at all (mean ZNCC below ``lost_zncc``);
 * degraded: tracked, but the inlier patches correlate poorly with the image (mean ZNCC below
-  ``min_zncc``: they landed on other texture), or the depth term rejects most of its points (the
+  ``min_zncc``: they landed on other texture), the rotation disagrees with the gyro's prediction by
+  more than ``max_gyro_disagreement_deg``, or the depth term rejects most of its points (the
   photometric optimum disagrees with the scene's geometry).
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
-from atsvo_ros.core.geometry import relative_motion, se3_inv
+from atsvo_ros.core.geometry import relative_motion, rotation_angle_rad, se3_inv
 from atsvo_ros.core.tracker import TrackResult
 
 OK, DEGRADED, LOST = "ok", "degraded", "lost"
@@ -42,8 +43,9 @@ class Verdict:
 
 
 def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: np.ndarray,
-          affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: float) -> Verdict:
-    """Apply the checks of the module docstring to one tracking result."""
+          affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: float,
+          gyro_T_c_w: np.ndarray | None = None) -> Verdict:
+    """Apply the checks of the module docstring to one tracking result (``gyro_T_c_w``: the gyro's prediction)."""
     cfg = config.tracker
     if not res.ok:
         return Verdict.lost("no estimate (NaN in the pose or its covariance)")
@@ -65,6 +67,10 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
         return Verdict.lost(f"patches do not match the image (mean ZNCC {zncc:.2f})")
     if np.isfinite(zncc) and zncc < cfg.min_zncc:
         return Verdict(DEGRADED, f"patches match the image poorly (mean ZNCC {zncc:.2f})")
+    if gyro_T_c_w is not None:
+        off = np.degrees(rotation_angle_rad(T_c_w[:3, :3] @ gyro_T_c_w[:3, :3].T))
+        if off > cfg.max_gyro_disagreement_deg:
+            return Verdict(DEGRADED, f"the pose disagrees with the gyro by {off:.1f} deg")
     depth = res.blocks.get("depth")
     if (depth is not None and depth.n_visible >= cfg.min_inliers
             and depth.inlier_fraction < cfg.min_depth_inlier_fraction):

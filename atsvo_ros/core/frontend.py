@@ -124,10 +124,8 @@ class RgbdFrontEnd(ImageFrontEnd):
         grey = self.rectify(grey)
         if not frame.depth_rectified:
             depth = self.rectify(depth, nearest=True)
-        usable = np.where(np.isfinite(depth) & (depth >= self.depth_min_m) & (depth <= self.depth_max_m),
-                          depth, 0.0).astype(np.float32)
-        return PreparedFrame(int(frame.stamp_ns), self.pyramid(grey), depth,
-                             depth_pyramid(usable, self.n_levels, self.depth_edge_ratio), int(np.count_nonzero(usable)))
+        dpyr = depth_pyramid(depth, self.n_levels, self.depth_edge_ratio, self.depth_min_m, self.depth_max_m)
+        return PreparedFrame(int(frame.stamp_ns), self.pyramid(grey), depth, dpyr, int(np.count_nonzero(dpyr[0])))
 
 
 __all__ = ["ImageFrontEnd", "PreparedFrame", "RgbdFrontEnd", "to_grey", "usable_levels"]

@@ -104,11 +104,13 @@ class Tracking:
         return out
 
     def track(self, frame: PreparedFrame, guesses: list[np.ndarray], affine: tuple[float, float],
-              reference: np.ndarray, rolling_shutter: RollingShutter | None = None) -> TrackingOutcome:
+              reference: np.ndarray, rolling_shutter: RollingShutter | None = None,
+              gyro_T_c_w: np.ndarray | None = None) -> TrackingOutcome:
         """Align ``frame`` to the snapshot from ``guesses`` and judge the estimate.
 
         ``reference`` is the last trusted pose (for the step-size check); ``affine`` the brightness
-        model carried from the previous frame.
+        model carried from the previous frame; ``gyro_T_c_w`` the gyro's prediction, when there is one
+        (the estimate must agree with its rotation).
         """
         cfg = self.config.tracker
         blocks = self.blocks(frame, rolling_shutter)
@@ -128,7 +130,7 @@ class Tracking:
         rgb = next((b for b in blocks if isinstance(b, PhotometricBlock)), None)
         if rgb is not None and inl.any() and np.isfinite(rgb.zncc[inl]).any():
             zncc = float(np.nanmean(rgb.zncc[inl]))
-        verdict = judge(self.config, res, T_c_w, reference, affine, new_affine, zncc)
+        verdict = judge(self.config, res, T_c_w, reference, affine, new_affine, zncc, gyro_T_c_w)
         if len(states) == len(self._outlier_runs):
             self._outlier_runs = np.where(states == OUTLIER, self._outlier_runs + 1,
                                           np.where(states == INLIER, 0, self._outlier_runs)).astype(np.int32)

@@ -30,6 +30,9 @@ class RgbModel:
         gamma: output encoding exponent (sRGB-like).
         ae_target / ae_time_constant_s / gain_limits: auto-gain set point, speed and range.
         vignetting: share of the cos^4 falloff applied at the image corners.
+        readout_time_s: rolling-shutter readout, first to last row (0 = global shutter, as the D455's
+            OV9782 colour imager; a Kinect v1's colour camera reads out over ~28 ms). Row ``r`` is exposed
+            around ``stamp + readout (r / (H - 1) - 1/2)``: the stamp is the middle row's time.
     """
 
     max_blur_step_px: float = 1.0
@@ -42,10 +45,13 @@ class RgbModel:
     ae_time_constant_s: float = 0.3
     gain_limits: tuple[float, float] = (0.25, 8.0)
     vignetting: float = 0.35
+    readout_time_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.max_blur_step_px <= 0 or self.max_subframes < 1:
             raise SimulationError("max_blur_step_px must be > 0 and max_subframes >= 1")
+        if not 0.0 <= self.readout_time_s <= 0.1:
+            raise SimulationError(f"readout_time_s must be in [0, 0.1] s, got {self.readout_time_s}")
 
 
 @dataclass(frozen=True)
@@ -103,6 +109,28 @@ class ColorSensor:
         a = 1.0 - np.exp(-dt / m.ae_time_constant_s)
         gain = self.gain * (wanted / self.gain) ** a  # first-order loop in log-gain
         self.gain = float(np.clip(gain, *m.gain_limits))
+
+
+def row_weights(sub_times_s: np.ndarray, height: int, exposure_s: float, readout_time_s: float) -> np.ndarray:
+    """(n_sub, height) weights of each sub-frame in each row's exposure (rows sum to 1).
+
+    Sub-frame ``j`` stands for the time bin around ``sub_times_s[j]`` (relative to the stamp, half-way to
+    its neighbours); row ``r`` integrates ``[t_r - exposure/2, t_r + exposure/2]`` with
+    ``t_r = readout (r / (H - 1) - 1/2)``. The weight is the overlap of the two intervals; a row whose
+    window falls between sub-frames takes the nearest one.
+    """
+    t = np.asarray(sub_times_s, dtype=np.float64)
+    mid = 0.5 * (t[1:] + t[:-1])
+    lo = np.concatenate([[-np.inf], mid])
+    hi = np.concatenate([mid, [np.inf]])
+    rows = readout_time_s * (np.arange(height) / max(height - 1, 1) - 0.5)
+    a = rows[None, :] - 0.5 * exposure_s
+    b = rows[None, :] + 0.5 * exposure_s
+    w = np.clip(np.minimum(hi[:, None], b) - np.maximum(lo[:, None], a), 0.0, None)
+    empty = w.sum(axis=0) <= 0
+    if np.any(empty):
+        w[np.argmin(np.abs(t[:, None] - rows[None, empty]), axis=0), np.flatnonzero(empty)] = 1.0
+    return w / w.sum(axis=0, keepdims=True)
 
 
 def depth_to_mm(depth_m: np.ndarray, model: DepthModel, rng: np.random.Generator) -> np.ndarray:

@@ -36,7 +36,7 @@ from atsvo_ros.sim.events import EventModel, EventSensor
 from atsvo_ros.sim.imu import ImuModel, ImuSensor
 from atsvo_ros.sim.motion import GRAVITY, SCENARIOS, Motion, make_motion
 from atsvo_ros.sim.render import Renderer
-from atsvo_ros.sim.rgbd import ColorSensor, DepthModel, RgbModel, depth_to_mm
+from atsvo_ros.sim.rgbd import ColorSensor, DepthModel, RgbModel, depth_to_mm, row_weights
 from atsvo_ros.sim.scene import Scene, make_scene
 
 LAYOUTS = ("robot", "mvsec")
@@ -243,7 +243,10 @@ class Simulation:
                              (rig.rgb_camera.height, rig.rgb_camera.width), self._rng_rgb)
         probe = _MotionProbe(rig.rgb_camera, renderer.rays)
         n = int(np.floor(spec.duration_s * spec.rate_hz + 1e-9)) + 1
-        half = int(round(spec.exposure_s * 0.5e9))
+        readout_s = spec.rgb_model.readout_time_s
+        # Sub-frames span the exposure, and with a rolling shutter the readout as well (each row then
+        # averages the sub-frames inside its own exposure window; depth stays global shutter).
+        half = int(round((spec.exposure_s + readout_s) * 0.5e9))
         depth_prev = None
         for k in range(n):
             stamp = self.t_start_ns + int(round(k * 1e9 / spec.rate_hz))
@@ -257,9 +260,13 @@ class Simulation:
             n_sub += 1 - n_sub % 2
             times = stamp + (np.linspace(-half, half, n_sub) if n_sub > 1 else np.zeros(1)).round().astype(np.int64)
             poses = self.T_world_rgb(times)
+            weights = None if readout_s == 0 else row_weights((times - stamp) * 1e-9, rig.rgb_camera.height,
+                                                                spec.exposure_s, readout_s)
             acc = None
             for j, T in enumerate(poses):
                 _, depth, col = renderer.render(T, rgb=True)
+                if weights is not None:
+                    col = col * (weights[j] * n_sub).astype(np.float32)[:, None, None]
                 acc = col if acc is None else np.add(acc, col, out=acc)
                 if j == n_sub // 2:
                     depth_prev = depth

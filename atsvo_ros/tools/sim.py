@@ -28,6 +28,8 @@ def _main(args: argparse.Namespace) -> int:
                                  contrast_pos=args.contrast or em.contrast_pos,
                                  contrast_neg=args.contrast or em.contrast_neg)
         spec = dataclasses.replace(spec, event_model=em)
+    if args.rgb_readout:
+        spec = dataclasses.replace(spec, rgb_model=dataclasses.replace(spec.rgb_model, readout_time_s=args.rgb_readout))
     summary = write_sequence(spec, args.out, fmt=args.format, event_msg=args.event_msg, encoding=args.encoding,
                              force=args.force, progress=not args.quiet)
     print(f"{args.scenario} {args.duration:g} s seed {args.seed}: {summary['frames']} RGB-D frames, "
@@ -54,6 +56,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--height", type=int, default=None, help="colour image height")
     p.add_argument("--rate", type=float, default=30.0, help="RGB-D frame rate in Hz (default 30)")
     p.add_argument("--exposure", type=float, default=0.008, help="colour exposure time in s (motion blur; 0.008)")
+    p.add_argument("--rgb-readout", type=float, default=0.0,
+                   help="colour rolling-shutter readout in s (default 0: global shutter as the D455; ~0.028 for a "
+                        "Kinect v1)")
     p.add_argument("--gt-rate", type=float, default=200.0, help="ground-truth pose rate in Hz (default 200)")
     p.add_argument("--event-msg", default="packet", choices=EVENT_MSGS,
                    help="layout robot: event_camera_msgs/EventPacket (packet) or dvs_msgs/EventArray (dvs)")

@@ -105,3 +105,35 @@ def test_rgb_model_validation():
         ColorSensor(RgbModel(), 0.0, np.zeros((4, 3)), (2, 2), np.random.default_rng(0))
     with pytest.raises(SimulationError):
         RgbModel(max_subframes=0)
+
+
+def test_rolling_shutter_rows_average_their_own_exposure_window():
+    from atsvo_ros.sim.rgbd import row_weights
+
+    t = np.linspace(-0.02, 0.02, 21)  # sub-frames every 2 ms over a 40 ms span
+    w = row_weights(t, 101, exposure_s=0.008, readout_time_s=0.03)
+    assert w.shape == (21, 101) and np.allclose(w.sum(axis=0), 1.0)
+    centre = (t[:, None] * w).sum(axis=0)  # the mean time each row saw
+    assert np.allclose(centre, 0.03 * (np.arange(101) / 100 - 0.5), atol=2e-4)  # top early, bottom late
+    assert np.allclose(row_weights(t, 5, 0.008, 0.0), row_weights(t, 5, 0.008, 0.0)[:, :1])  # global: equal
+    # exposure shorter than the sub-frame spacing: each row takes the nearest sub-frame
+    w1 = row_weights(np.array([-0.01, 0.0, 0.01]), 3, exposure_s=1e-6, readout_time_s=0.02)
+    assert np.array_equal(w1, np.eye(3))
+
+
+def test_simulated_rolling_shutter_skews_a_turning_view():
+    """Turning about the vertical axis, the rows of a rolling-shutter frame see the scene at their own time."""
+    import dataclasses
+
+    from atsvo_ros.sim.sequence import SequenceSpec, make_simulation
+
+    base = SequenceSpec(scenario="flying", duration_s=0.2, seed=1, width=96, height=72, imu=False)
+    rs = dataclasses.replace(base, rgb_model=dataclasses.replace(base.rgb_model, readout_time_s=0.03))
+    g = [f.rgb.astype(float) for f in make_simulation(base).frames()]
+    r = [f.rgb.astype(float) for f in make_simulation(rs).frames()]
+    # the middle rows are exposed at the stamp in both; the top and bottom rows are not
+    mid = slice(33, 39)
+    edge = np.r_[0:6, 66:72]
+    d_mid = np.mean([np.abs(a[mid] - b[mid]).mean() for a, b in zip(g[2:], r[2:])])
+    d_edge = np.mean([np.abs(a[edge] - b[edge]).mean() for a, b in zip(g[2:], r[2:])])
+    assert d_edge > 2 * d_mid, (d_edge, d_mid)

@@ -169,3 +169,15 @@ def _depth_pyramid_level(depth, max_ratio):  # pragma: no cover - compiled
             if c >= 2 and hi - lo <= max_ratio * lo:
                 out[y, x] = s / c
     return out
+
+
+@njit(cache=True)
+def _valid_depth(depth, min_m, max_m):  # pragma: no cover - compiled
+    """A copy with 0 wherever the depth is not a finite value within ``[min_m, max_m]``."""
+    h, w = depth.shape
+    out = np.empty((h, w), np.float32)
+    for y in range(h):
+        for x in range(w):
+            z = depth[y, x]
+            out[y, x] = z if (z >= min_m and z <= max_m) else 0.0  # NaN fails both comparisons
+    return out

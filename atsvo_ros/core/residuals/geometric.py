@@ -19,10 +19,14 @@ from atsvo_ros.core.residuals import _geometric_kernels as kern
 from atsvo_ros.errors import TrackingError
 
 
-def depth_pyramid(depth_m: np.ndarray, levels: int, edge_ratio: float = 0.05) -> list[np.ndarray]:
-    """float32 depth per pyramid level (0 = invalid); coarse pixels never average across a depth edge."""
-    d0 = np.where(np.isfinite(depth_m), depth_m, 0.0).astype(np.float32)
-    out = [np.ascontiguousarray(d0)]
+def depth_pyramid(depth_m: np.ndarray, levels: int, edge_ratio: float = 0.05, min_m: float = 0.0,
+                  max_m: float = np.inf) -> list[np.ndarray]:
+    """float32 depth per pyramid level (0 = invalid: NaN, inf or outside ``[min_m, max_m]``).
+
+    Coarse pixels never average across a depth edge.
+    """
+    d0 = kern._valid_depth(np.ascontiguousarray(depth_m, dtype=np.float32), float(min_m), float(max_m))
+    out = [d0]
     for _ in range(1, levels):
         if min(out[-1].shape) < 4:
             break

@@ -1,0 +1,53 @@
+"""The consistency checks on a tracking result: each rule alone turns an estimate degraded or lost."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from atsvo_ros.config import load_config
+from atsvo_ros.core.checks import DEGRADED, LOST, OK, judge
+from atsvo_ros.core.geometry import se3_exp
+from atsvo_ros.core.tracker import BlockStats, TrackResult
+
+CFG = load_config("synthetic")
+
+
+def _result(**changes) -> TrackResult:
+    base = TrackResult(np.eye(4), {"rgb": (0.0, 0.0)}, np.eye(6) * 1e-6, 100.0, 900, 1000, 1000, 12, True, 0,
+                       {"rgb": np.ones(1000, np.int8)},
+                       {"rgb": BlockStats(1000, 1000, 900, 50.0, 40.0, 8100),
+                        "depth": BlockStats(800, 700, 690, 30.0, 20.0, 690)})
+    return dataclasses.replace(base, **changes)
+
+
+def _judge(res=None, T=np.eye(4), ref=np.eye(4), aff=((0.0, 0.0), (0.0, 0.0)), zncc=0.9, gyro=None):
+    return judge(CFG, res or _result(), T, ref, aff[0], aff[1], zncc, gyro)
+
+
+def test_a_good_estimate_is_ok():
+    v = _judge()
+    assert v.level == OK and v.reason is None
+
+
+@pytest.mark.parametrize("kwargs, level, words", [
+    ({"res": _result(covariance=np.full((6, 6), np.nan))}, LOST, "NaN"),
+    ({"res": _result(singular=True)}, LOST, "singular"),
+    ({"res": _result(blocks={"rgb": BlockStats(1000, 1000, 200, 1, 1, 1)})}, LOST, "photometric inliers"),
+    ({"res": _result(covariance=np.eye(6) * 0.01)}, LOST, "degenerate"),
+    ({"aff": ((0.0, 0.0), (np.log(3.0), 0.0))}, LOST, "gain"),
+    ({"T": se3_exp(np.array([0.8, 0, 0, 0, 0, 0]))}, LOST, "jump"),
+    ({"zncc": 0.1}, LOST, "ZNCC"),
+    ({"zncc": 0.4}, DEGRADED, "ZNCC"),
+    ({"gyro": se3_exp(np.array([0, 0, 0, 0.0, 0.06, 0]))}, DEGRADED, "gyro"),
+    ({"res": _result(blocks={"rgb": BlockStats(1000, 1000, 900, 1, 1, 1),
+                             "depth": BlockStats(800, 700, 100, 1, 1, 1)})}, DEGRADED, "depth term"),
+])
+def test_each_rule_alone(kwargs, level, words):
+    v = _judge(**kwargs)
+    assert v.level == level and words in v.reason, v
+
+
+def test_agreement_with_the_gyro_within_its_tolerance_is_ok():
+    assert _judge(gyro=se3_exp(np.array([0, 0, 0, 0.0, 0.02, 0]))).level == OK  # 1.1 deg < 2 deg
