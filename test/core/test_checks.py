@@ -22,7 +22,10 @@ def _result(**changes) -> TrackResult:
     return dataclasses.replace(base, **changes)
 
 
-def _judge(res=None, T=np.eye(4), ref=np.eye(4), aff=((0.0, 0.0), (0.0, 0.0)), zncc=0.9, gyro=None):
+I4 = np.eye(4)
+
+
+def _judge(res=None, T=I4, ref=I4, aff=((0.0, 0.0), (0.0, 0.0)), zncc=0.9, gyro=None):
     return judge(CFG, res or _result(), T, ref, aff[0], aff[1], zncc, gyro)
 
 

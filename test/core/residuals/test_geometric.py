@@ -5,7 +5,7 @@ import numpy as np
 
 from atsvo_ros.config import TrackerConfig
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.geometry import se3_exp, se3_inv, se3_log
+from atsvo_ros.core.geometry import se3_exp, se3_log
 from atsvo_ros.core.pyramid import pyramid_cameras
 from atsvo_ros.core.residuals.geometric import GeometricBlock, depth_pyramid
 from atsvo_ros.core.tracker import Tracker
