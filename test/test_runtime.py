@@ -88,7 +88,7 @@ def test_runtime_tracks_and_matches_the_replay_tool(bag, tmp_path):
 
 
 def test_frames_wait_for_camera_info_and_bad_input_is_counted_not_fatal(bag):
-    cfg = load_config("synthetic")
+    cfg = load_config("synthetic", overrides={"mode": "rgbd"})  # no events: frames go out once paired
     rt = OdometryRuntime(cfg)
     topics = cfg.topics
     rgb_msgs, depth_msgs, info = [], [], None

@@ -45,15 +45,24 @@ class Verdict:
 def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: np.ndarray,
           affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: float,
           gyro_T_c_w: np.ndarray | None = None) -> Verdict:
-    """Apply the checks of the module docstring to one tracking result (``gyro_T_c_w``: the gyro's prediction)."""
+    """Apply the checks of the module docstring to one tracking result.
+
+    ``zncc`` is the best mean ZNCC of the image terms' inlier patches; ``gyro_T_c_w`` the gyro's prediction.
+    """
     cfg = config.tracker
     if not res.ok:
         return Verdict.lost("no estimate (NaN in the pose or its covariance)")
     if res.singular:
         return Verdict.lost("singular normal equations (no texture or depth structure constrains the pose)")
-    rgb = res.blocks.get("rgb")
-    if rgb is not None and rgb.n_inliers < max(cfg.min_inliers, cfg.min_inlier_fraction * rgb.n_visible):
-        return Verdict.lost(f"{rgb.n_inliers} photometric inliers of {rgb.n_visible} visible map points")
+    # The image terms are judged apart: in fused mode a blurred colour image may fail while the ATS term
+    # holds the pose; the frame is lost only when no image term constrains it.
+    image_terms = {n: b for n, b in res.blocks.items() if n in ("rgb", "ats")}
+    need = {"rgb": (cfg.min_inliers, cfg.min_inlier_fraction),
+            "ats": (config.fusion.min_points, config.fusion.min_inlier_fraction)}
+    failing = {n: b for n, b in image_terms.items() if b.n_inliers < max(need[n][0], need[n][1] * b.n_visible)}
+    if image_terms and len(failing) == len(image_terms):
+        return Verdict.lost("; ".join(f"{b.n_inliers} {'photometric' if n == 'rgb' else 'ATS'} inliers of "
+                                      f"{b.n_visible} visible map points" for n, b in failing.items()))
     std = float(np.sqrt(max(np.linalg.eigvalsh(res.covariance[:3, :3]).max(), 0.0)))
     if std > cfg.max_position_std_m:
         return Verdict.lost(f"degenerate geometry (position std {std:.3f} m)")

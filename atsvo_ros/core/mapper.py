@@ -15,14 +15,24 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.event_frontend import EventFrame
+from atsvo_ros.core.event_map import build_event_map
 from atsvo_ros.core.frontend import PreparedFrame
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.core.keyframes import assess_health
-from atsvo_ros.core.map import MapSnapshot, PointMap, extract_patches, smoothed_depth, valid_depth_mask
+from atsvo_ros.core.map import (
+    MapSnapshot,
+    PointMap,
+    TemporaryEventMap,
+    extract_patches,
+    smoothed_depth,
+    valid_depth_mask,
+)
 from atsvo_ros.core.photometric import RGB_PATTERN
 from atsvo_ros.core.residuals import RollingShutter
 from atsvo_ros.core.selection.depth import select_depth_pixels
 from atsvo_ros.core.selection.rgb import select_rgb_pixels
+from atsvo_ros.errors import TrackingError
 
 
 @dataclass(frozen=True)
@@ -45,11 +55,23 @@ class KeyframeRequest:
     rolling_shutter: RollingShutter | None = None
 
 
-class Mapper:
-    """Owns the map; turns keyframe requests into snapshots."""
+@dataclass(frozen=True)
+class EventMapRequest:
+    """What tracking hands to mapping to build the temporary event map: one frame's surface and depth."""
 
-    def __init__(self, config: AtsvoConfig, cameras: list[CameraModel]) -> None:
+    event_frame: EventFrame
+    depth_m: np.ndarray  # the colour-aligned depth of the same frame, on the colour camera's pinhole grid
+    T_c_w: np.ndarray  # the colour camera's pose of that frame
+
+
+class Mapper:
+    """Owns the map; turns keyframe requests into snapshots (and event-map requests into event maps)."""
+
+    def __init__(self, config: AtsvoConfig, cameras: list[CameraModel], event_camera: CameraModel | None = None
+                 ) -> None:
         self.config = config
+        self.event_camera = event_camera
+        self.T_rgb_event = config.rig.T_rgb_event_matrix()
         self.camera = cameras[0]
         self.n_levels = len(cameras)
         self._map = PointMap(self.n_levels, len(RGB_PATTERN))
@@ -99,6 +121,13 @@ class Mapper:
         self.snapshot = self._map.snapshot(self._snapshot_id, max(1, ref.n_tracked), ref.healthy_regions)
         return self.snapshot
 
+    def build_event_map(self, req: EventMapRequest) -> TemporaryEventMap:
+        """The temporary event map of Eq. 4 from one frame (:func:`atsvo_ros.core.event_map.build_event_map`)."""
+        if self.event_camera is None:
+            raise TrackingError("the mapper has no event camera: it cannot build an event map")
+        return build_event_map(req.event_frame, req.depth_m, self.camera, self.event_camera, se3_inv(req.T_c_w),
+                               self.T_rgb_event)
+
     def _covered(self, uv: np.ndarray, tracked_uv: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         """Candidates in a cell (of the size that spreads the target count) that a tracked point occupies."""
         h, w = shape
@@ -110,4 +139,4 @@ class Mapper:
         return occ[uv[:, 1] // cell, uv[:, 0] // cell]
 
 
-__all__ = ["KeyframeRequest", "Mapper"]
+__all__ = ["EventMapRequest", "KeyframeRequest", "Mapper"]

@@ -40,6 +40,11 @@ class MotionModel:
         self._history.append((int(stamp_ns), np.asarray(T_c_w, dtype=np.float64).copy()))
 
     @property
+    def history(self) -> tuple[tuple[int, np.ndarray], ...]:
+        """The last (at most two) ``(stamp_ns, T_c_w)``, oldest first."""
+        return tuple(self._history)
+
+    @property
     def last(self) -> tuple[int, np.ndarray] | None:
         return self._history[-1] if self._history else None
 
@@ -72,6 +77,18 @@ class MotionModel:
         xi, dt = vel
         ratio = float(np.clip((stamp_ns - s1) / dt, 0.0, self.MAX_RATIO))
         return se3_exp(ratio * xi) @ T1
+
+    def predict_scaled(self, stamp_ns: int, scale: float) -> np.ndarray:
+        """The constant-motion prediction with the last motion scaled by ``scale`` (an accelerating or braking turn)."""
+        if not self._history:
+            return np.eye(4)
+        s1, T1 = self._history[-1]
+        vel = self._velocity()
+        if vel is None:
+            return T1.copy()
+        xi, dt = vel
+        ratio = float(np.clip((stamp_ns - s1) / dt, 0.0, self.MAX_RATIO))
+        return se3_exp(scale * ratio * xi) @ T1
 
     def predict_with_rotation(self, stamp_ns: int, R_c1_c0: np.ndarray) -> np.ndarray:
         """Prediction with the rotation from the last frame ``c0`` to the new one ``c1`` given (e.g. by the gyro).

@@ -26,12 +26,13 @@ import numpy as np
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.checks import DEGRADED, OK
+from atsvo_ros.core.event_frontend import EventFrame, EventFrontEnd
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
 from atsvo_ros.core.frontend import PreparedFrame, RgbdFrontEnd
-from atsvo_ros.core.geometry import hat, se3_exp, se3_inv
+from atsvo_ros.core.geometry import hat, se3_exp, se3_inv, so3_log
 from atsvo_ros.core.imu import ImuBatch, integrate_gyro
-from atsvo_ros.core.mapper import KeyframeRequest, Mapper
+from atsvo_ros.core.mapper import EventMapRequest, KeyframeRequest, Mapper
 from atsvo_ros.core.motion import MotionModel
 from atsvo_ros.core.residuals import RollingShutter
 from atsvo_ros.core.tracking import Tracking, TrackingOutcome, rotation_hypotheses
@@ -49,10 +50,10 @@ def _adjoint(T: np.ndarray) -> np.ndarray:
 
 
 class Odometry:
-    """Direct RGB-D odometry (Eq. 4 with the RGB and depth terms; events are buffered for the fusion)."""
+    """Direct RGB-D (+ event) odometry: Eq. 4 with the RGB, depth and, during fast motion, ATS terms."""
 
-    #: Event fusion is not implemented yet: events are buffered and ignored.
-    supports_events: bool = False
+    #: Events are fused when an event camera is given (mode fused).
+    supports_events: bool = True
     #: A gap between frames longer than this resets the motion model (constant motion is meaningless).
     MAX_GAP_S = 1.0
     _BUFFER_NS = 1_000_000_000
@@ -70,9 +71,17 @@ class Odometry:
         self.T_rgb_base = se3_inv(self.T_base_rgb)
         self.R_rgb_imu = config.rig.T_rgb_imu_matrix()[:3, :3]
         self.motion = MotionModel()
-        self.tracking = Tracking(config, self.cameras)
-        self.mapper = Mapper(config, self.cameras)
-        self._events: deque[EventBatch] = deque()
+        self.events: EventFrontEnd | None = None
+        event_cams = None
+        if event_camera is not None and config.mode == "fused":
+            self.events = EventFrontEnd(event_camera, config, config.tracker.pyramid_levels)
+            event_cams = self.events.cameras
+        T_event_rgb = se3_inv(config.rig.T_rgb_event_matrix())
+        self.tracking = Tracking(config, self.cameras, event_cams, T_event_rgb)
+        self.mapper = Mapper(config, self.cameras, None if self.events is None else self.events.camera)
+        self._event_time_s = 0.0  # ATS updates since the last frame (counted in its tracking time)
+        # the previous frame's event surface, depth and pose: what a temporary event map is built from
+        self._prev_event: tuple[EventFrame, np.ndarray, np.ndarray] | None = None
         self._imu: deque[ImuBatch] = deque()
         self._affine = (0.0, 0.0)
         self._last_stamp: int | None = None
@@ -92,13 +101,12 @@ class Odometry:
 
     # ------------------------------------------------------------------ inputs
     def add_events(self, batch: EventBatch) -> None:
-        """Buffer an event batch (time order); without fusion only the last second is kept."""
-        if len(batch) == 0:
+        """Fold a time-ordered event batch into the time surface (ignored without an event camera)."""
+        if self.events is None or len(batch) == 0:
             return
-        self._events.append(batch)
-        newest = batch.t_last_ns
-        while self._events and self._events[0].t_last_ns < newest - self._BUFFER_NS:
-            self._events.popleft()
+        t0 = time.perf_counter()
+        self.events.add_events(batch)
+        self._event_time_s += time.perf_counter() - t0
 
     def add_imu(self, batch: ImuBatch) -> None:
         """Buffer IMU samples (time order; the last second is kept): their gyro predicts each frame's rotation."""
@@ -112,7 +120,9 @@ class Odometry:
     # ------------------------------------------------------------------ main entry
     def process_frame(self, frame: RgbdFrame) -> OdometryResult:
         """Track one frame, insert a keyframe when needed, return the pose estimate."""
-        t0 = time.perf_counter()
+        # the event surface's updates since the last frame count towards this frame's tracking time
+        t0 = time.perf_counter() - self._event_time_s
+        self._event_time_s = 0.0
         # Internally a frame lives at the time its image was exposed (middle row); the pose is published
         # at the stamp (see _result).
         stamp = int(frame.stamp_ns) + self._offset_ns
@@ -120,21 +130,35 @@ class Odometry:
         note = self._check_clock(stamp)
         self._last_stamp = stamp
         predicted = self.motion.predict(stamp)
+        ev_frame = self.events.render(stamp) if self.events is not None else None
         if not self.tracking.has_map:
             return self._initialise(prepared, stamp, predicted, t0, note)
         gyro = self._gyro_prediction(stamp)
+        fast = self._is_fast()
         guesses = [predicted] if gyro is None else [gyro, predicted]
         if self.motion.last is not None and not np.allclose(self.motion.last[1], predicted):
             guesses.append(self.motion.last[1])  # zero motion
+            if gyro is None and fast:
+                guesses += [self.motion.predict_scaled(stamp, k) for k in self.config.tracker.velocity_scales]
         last = self.motion.last[1] if self.motion.last else predicted
         rs = self._rolling_shutter(stamp)
-        out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro)
+        # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
+        self.tracking.set_event_map(self._event_map() if fast else None)
+        fused = self.tracking.uses_events(ev_frame)
+        out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
+        if out.verdict.level not in (OK, DEGRADED) and not fused and self._prev_event is not None:
+            # RGB-D alone could not hold the pose (a sudden push-off from a standstill): the events saw the motion
+            self.tracking.set_event_map(self._event_map())
+            if self.tracking.uses_events(ev_frame):
+                fused = True
+                out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
         status = TrackingStatus.OK if out.verdict.level == OK else TrackingStatus.DEGRADED
         if out.verdict.level not in (OK, DEGRADED):
             reason = out.verdict.reason
-            out = self._relocalise(prepared, guesses[0], last, rs, gyro)
+            out = self._relocalise(prepared, guesses[0], last, rs, gyro, ev_frame)
             if out is None:
                 self.last_loss_reason = reason
+                self._prev_event = None
                 return self._reinitialise(prepared, stamp, predicted, t0, reason)
             status = TrackingStatus.RELOCALISED
         t_track = time.perf_counter() - t0
@@ -145,7 +169,9 @@ class Odometry:
             if out.health is not None and out.health.needs_keyframe:
                 kf = self._insert(self.tracking.keyframe_request(prepared, out, rs)) > 0
         self.motion.push(stamp, out.T_c_w)
-        return self._result(stamp, out.T_c_w, out, status, t_track, kf)
+        if ev_frame is not None:
+            self._prev_event = (ev_frame, prepared.depth_m, out.T_c_w)
+        return self._result(stamp, out.T_c_w, out, status, t_track, kf, fused)
 
     # ------------------------------------------------------------------ steps
     def _check_clock(self, stamp: int) -> str | None:
@@ -186,13 +212,47 @@ class Odometry:
         return self.motion.predict_with_rotation(stamp, R_c0_c1.T)
 
     def _relocalise(self, prepared: PreparedFrame, predicted: np.ndarray, last: np.ndarray,
-                    rs: RollingShutter | None, gyro: np.ndarray | None) -> TrackingOutcome | None:
+                    rs: RollingShutter | None, gyro: np.ndarray | None,
+                    ev_frame: EventFrame | None) -> TrackingOutcome | None:
         """Track again from wider starting points: the recent keyframes' poses and doubled rotation hypotheses."""
         cfg = self.config.tracker
         guesses = [predicted, *(se3_inv(kf.T_w_c) for kf in reversed(self.tracking.snapshot.keyframes[-3:]))]
         guesses += rotation_hypotheses(predicted, max(2.0 * cfg.rotation_hypotheses_deg, 4.0))
-        out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro)
+        out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
         return out if out.verdict.level == OK else None
+
+    def motion_rates(self) -> tuple[float, float] | None:
+        """The paper's relative-motion factor: camera angular rate (rad/s) and speed (m/s) over the last two frames.
+
+        The angular rate comes from the gyro when it covers the interval (measured, not estimated), else
+        from the two poses; None before two frames.
+        """
+        rel = self.motion.relative_motion()
+        if rel is None:
+            return None
+        ang, speed = rel
+        hist = self.motion.history
+        if self._imu and len(hist) == 2:
+            try:
+                R = integrate_gyro(ImuBatch.concatenate(list(self._imu)), hist[0][0], hist[1][0])
+                ang = float(np.linalg.norm(so3_log(R))) / max((hist[1][0] - hist[0][0]) * 1e-9, 1e-9)
+            except ImuError:
+                pass
+        return ang, speed
+
+    def _is_fast(self) -> bool:
+        """The relative-motion factor of the last two frames is above a threshold (angular rate or speed)."""
+        rates = self.motion_rates()
+        fu = self.config.fusion
+        return rates is not None and (np.degrees(rates[0]) > fu.rate_threshold_deg_s
+                                      or rates[1] > fu.speed_threshold_m_s)
+
+    def _event_map(self):
+        """The temporary event map built (by mapping) from the previous frame's surface, depth and pose, or None."""
+        if self._prev_event is None:
+            return None
+        ev_frame, depth, T_c_w = self._prev_event
+        return self.mapper.build_event_map(EventMapRequest(self.events.select(ev_frame), depth, T_c_w))
 
     def _insert(self, request: KeyframeRequest) -> int:
         """Mapping, synchronously: insert the keyframe and track against the new snapshot from now on."""
@@ -232,7 +292,7 @@ class Odometry:
 
     # ------------------------------------------------------------------ output
     def _result(self, stamp: int, T_c_w: np.ndarray, out: TrackingOutcome | None, status: TrackingStatus,
-                t_track: float, kf: bool) -> OdometryResult:
+                t_track: float, kf: bool, fused: bool = False) -> OdometryResult:
         """The published result: the pose moved from the exposure time to the frame's stamp, in odom/base."""
         if self._offset_ns:
             T_c_w = se3_exp(-self._offset_ns * 1e-9 * self.motion.twist_per_s()) @ T_c_w
@@ -250,7 +310,8 @@ class Odometry:
                 cov = cov * self.config.tracker.degraded_covariance_scale
         inliers = {k: v.n_inliers for k, v in res.blocks.items()} if res is not None else {}
         n_points = len(self.tracking.snapshot)
-        return OdometryResult(stamp, T_odom_base, T_odom_cam, cov, status, "rgbd", float(t_track), int(n_points),
+        return OdometryResult(stamp, T_odom_base, T_odom_cam, cov, status, "fused" if fused else "rgbd",
+                              float(t_track), int(n_points),
                               int(inliers.get("rgb", 0)), bool(kf), self.last_loss_reason, inliers)
 
 

@@ -14,12 +14,13 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.checks import Verdict, judge
+from atsvo_ros.core.event_frontend import EventFrame
 from atsvo_ros.core.frontend import PreparedFrame
 from atsvo_ros.core.geometry import project_to_so3, se3_exp
 from atsvo_ros.core.keyframes import MapHealth, assess_health
-from atsvo_ros.core.map import MapSnapshot
+from atsvo_ros.core.map import MapSnapshot, TemporaryEventMap
 from atsvo_ros.core.mapper import KeyframeRequest
-from atsvo_ros.core.photometric import RGB_PATTERN, sample_patches
+from atsvo_ros.core.photometric import ATS_PATTERN, RGB_PATTERN, sample_patches
 from atsvo_ros.core.residuals import INLIER, OUTLIER, ResidualBlock, RollingShutter
 from atsvo_ros.core.residuals.geometric import GeometricBlock
 from atsvo_ros.core.residuals.photometric import PhotometricBlock
@@ -54,16 +55,37 @@ def rotation_hypotheses(T_c_w: np.ndarray, angle_deg: float) -> list[np.ndarray]
     return out
 
 
+def _mean_zncc(block: PhotometricBlock) -> float:
+    """Mean ZNCC of a photometric block's inlier patches after the final linearisation (NaN without any)."""
+    inl = block.state == INLIER
+    z = block.zncc[inl]
+    return float(np.nanmean(z)) if np.isfinite(z).any() else float("nan")
+
+
 class Tracking:
     """Per-frame tracking against the latest snapshot (see the module docstring)."""
 
-    def __init__(self, config: AtsvoConfig, cameras: list) -> None:
+    def __init__(self, config: AtsvoConfig, cameras: list, event_cameras: list | None = None,
+                 T_event_rgb: np.ndarray | None = None) -> None:
         self.config = config
         self.cameras = cameras
         self.camera = cameras[0]
+        self.event_cameras = event_cameras
+        self.T_event_rgb = np.eye(4) if T_event_rgb is None else np.asarray(T_event_rgb, dtype=np.float64)
         self.tracker = Tracker(config.tracker)
         self.snapshot = MapSnapshot.empty(len(cameras), len(RGB_PATTERN))
+        #: the temporary event map N of Eq. 4 (None: the event term is off)
+        self.event_map: TemporaryEventMap | None = None
         self._outlier_runs = np.zeros(0, np.int32)
+
+    def set_event_map(self, event_map: TemporaryEventMap | None) -> None:
+        """Use ``event_map`` for the event term from the next frame on (None: RGB-D only)."""
+        self.event_map = event_map
+
+    def uses_events(self, event_frame: EventFrame | None) -> bool:
+        """Whether the event term takes part: a surface for this frame and a big enough temporary map."""
+        return (event_frame is not None and self.event_map is not None and self.event_cameras is not None
+                and self.config.tracker.w_event > 0 and len(self.event_map) >= self.config.fusion.min_points)
 
     def set_snapshot(self, snapshot: MapSnapshot) -> None:
         """Track against ``snapshot`` from now on (mapping's latest)."""
@@ -75,8 +97,9 @@ class Tracking:
     def has_map(self) -> bool:
         return len(self.snapshot) > 0 or len(self.snapshot.geo_points_w) > 0
 
-    def blocks(self, frame: PreparedFrame, rolling_shutter: RollingShutter | None = None) -> list[ResidualBlock]:
-        """The residual blocks of Eq. 4 for this frame (RGB always, depth when it has weight and points).
+    def blocks(self, frame: PreparedFrame, rolling_shutter: RollingShutter | None = None,
+               event_frame: EventFrame | None = None) -> list[ResidualBlock]:
+        """The residual blocks of Eq. 4 for this frame: RGB, depth (weight and points), ATS (:meth:`uses_events`).
 
         ``rolling_shutter`` applies to the colour image only: modelling the same readout on a Kinect's
         registered depth made TUM fr1_rpy worse (ATE 1.9 vs 1.4 cm), and a D455's depth is global shutter.
@@ -101,19 +124,27 @@ class Tracking:
                 sigma_at_1m_m=cfg.depth_sigma_at_1m_m, sigma_min_m=cfg.depth_sigma_min_m, huber=cfg.depth_huber,
                 outlier=cfg.depth_outlier, edge_ratio=self.config.mapping.depth_edge_ratio,
                 coarse_points=cfg.coarse_level_points))
+        if self.uses_events(event_frame):
+            fu, em = self.config.fusion, self.event_map
+            # The ATS is not an image of the scene's brightness: no gain, but zero-mean patches (the surface
+            # level depends on the time since the last event, which differs between two frames).
+            out.append(PhotometricBlock(
+                "ats", em.points_w, em.patches, ATS_PATTERN, event_frame.pyramid, self.event_cameras,
+                T_cam_rgb=self.T_event_rgb, weight=cfg.w_event, sigma=fu.sigma, huber=fu.huber, outlier=fu.outlier,
+                gradient_weight=fu.gradient_weight, estimate_affine=False, zero_mean=True))
         return out
 
     def track(self, frame: PreparedFrame, guesses: list[np.ndarray], affine: tuple[float, float],
               reference: np.ndarray, rolling_shutter: RollingShutter | None = None,
-              gyro_T_c_w: np.ndarray | None = None) -> TrackingOutcome:
+              gyro_T_c_w: np.ndarray | None = None, event_frame: EventFrame | None = None) -> TrackingOutcome:
         """Align ``frame`` to the snapshot from ``guesses`` and judge the estimate.
 
         ``reference`` is the last trusted pose (for the step-size check); ``affine`` the brightness
         model carried from the previous frame; ``gyro_T_c_w`` the gyro's prediction, when there is one
-        (the estimate must agree with its rotation).
+        (the estimate must agree with its rotation); ``event_frame`` the event camera at this frame.
         """
         cfg = self.config.tracker
-        blocks = self.blocks(frame, rolling_shutter)
+        blocks = self.blocks(frame, rolling_shutter, event_frame)
         if not blocks:
             return self._failed(guesses[0], affine, "no map point to track")
         hyp = rotation_hypotheses(guesses[0], cfg.rotation_hypotheses_deg)
@@ -126,10 +157,8 @@ class Tracking:
         states = res.states.get("rgb", np.zeros(0, np.int8))
         inl = states == INLIER
         new_affine = self._new_affine(res, frame, T_c_w, inl, affine)
-        zncc = float("nan")
-        rgb = next((b for b in blocks if isinstance(b, PhotometricBlock)), None)
-        if rgb is not None and inl.any() and np.isfinite(rgb.zncc[inl]).any():
-            zncc = float(np.nanmean(rgb.zncc[inl]))
+        zncc = max((_mean_zncc(b) for b in blocks if isinstance(b, PhotometricBlock)), default=float("nan"),
+                   key=lambda z: -np.inf if np.isnan(z) else z)
         verdict = judge(self.config, res, T_c_w, reference, affine, new_affine, zncc, gyro_T_c_w)
         if len(states) == len(self._outlier_runs):
             self._outlier_runs = np.where(states == OUTLIER, self._outlier_runs + 1,

@@ -39,7 +39,7 @@ def _err(T_est, T_gt):
 
 def test_first_frame_defines_odom_and_offsets_come_out_in_base_frame(room, config):
     odo = Odometry(config, CAM)
-    assert odo.supports_events is False
+    assert odo.supports_events and odo.events is None  # no event camera given: RGB-D only
     T_b_c = config.rig.T_base_rgb_matrix()
     r0 = odo.process_frame(_frame(room, CAM, np.eye(4), 0))
     assert isinstance(r0, OdometryResult)
@@ -198,13 +198,18 @@ def test_clock_jumps_reset_the_motion_model_instead_of_stopping(room, config):
     assert dt < 6e-3 and dr < 0.1, (dt, dr)  # still tracking the scene (measured 2.6 mm, 0.02 deg)
 
 
-def test_events_are_buffered_and_bounded(config):
-    odo = Odometry(config, CAM, event_camera=config.event_camera.model())
+def test_events_feed_the_surface_and_their_buffer_stays_bounded(config):
+    ev_cam = config.event_camera.model()
+    odo = Odometry(config, CAM, event_camera=ev_cam)
     for k in range(30):
         t = np.arange(100, dtype=np.int64) * 1000 + k * 100_000_000
-        odo.add_events(EventBatch(np.zeros(100), np.zeros(100), t, np.ones(100)))
+        odo.add_events(EventBatch(np.full(100, 10), np.full(100, 20), t, np.ones(100)))
     odo.add_events(EventBatch.empty())
-    assert sum(len(b) for b in odo._events) <= 12 * 100
+    assert odo.events.surface.n_events == 3000 and odo.events.surface.active_mask()[20, 10]
+    assert sum(len(b) for b in odo.events._recent) <= 3 * 100  # only the selection window and a margin
+    rgbd_only = Odometry(load_config("synthetic", overrides={"mode": "rgbd"}), CAM, event_camera=ev_cam)
+    rgbd_only.add_events(EventBatch(np.zeros(3), np.zeros(3), np.arange(3), np.ones(3)))
+    assert rgbd_only.events is None
 
 
 def test_short_synthetic_trot_is_accurate():

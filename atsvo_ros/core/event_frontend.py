@@ -1,0 +1,111 @@
+"""The event camera's front end: time surface from the event stream, rendered, rectified and selected.
+
+Events go into the time surface (the ATS of Eq. 1-2, or an ablation) on the sensor's raw pixel grid,
+where the neighbour ring of Eq. 2 is defined; at each frame stamp the surface is rendered, rectified
+onto the pinhole model with the same maps as the colour camera's images
+(:class:`~atsvo_ros.core.frontend.ImageFrontEnd`: DVXplorer plumb_bob, MVSEC equidistant) and turned
+into a pyramid with gradients for the photometric ATS term. The event pixel selection of Section
+II-B runs on the rectified surface with the recent events' coordinates undistorted through a
+per-pixel lookup table.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.frontend import ImageFrontEnd
+from atsvo_ros.core.selection.events import select_event_pixels
+from atsvo_ros.core.time_surface import make_time_surface
+
+
+@dataclass(frozen=True)
+class EventFrame:
+    """The event camera at one frame stamp: the rectified surface, its pyramid, and its selected pixels."""
+
+    stamp_ns: int
+    surface: np.ndarray  # float32 0-255 on the pinhole grid
+    pyramid: list[np.ndarray]  # per level (H, W, 3) float32 [I, Ix, Iy]
+    selected: np.ndarray  # (N, 2) int pixel positions (pinhole grid), best first
+    n_events: int  # events in the selection window
+
+
+class EventFrontEnd:
+    """Time surface + rectification + pyramid + selection of one event camera (see the module docstring)."""
+
+    #: Events kept beyond the selection window (a frame's selection may run a frame later).
+    RETAIN_MARGIN_NS = 150_000_000
+
+    def __init__(self, raw_camera: CameraModel, config: AtsvoConfig, levels: int) -> None:
+        self.config = config
+        self.image = ImageFrontEnd(raw_camera, levels)
+        self.camera = self.image.camera
+        self.cameras = self.image.cameras
+        w, h = raw_camera.width, raw_camera.height
+        self.surface = make_time_surface(config.fusion.surface, w, h, config.ats)
+        self._window_ns = self.surface.window_ns()
+        self._keep_ns = int(round(config.event_selection.window_fraction * self._window_ns))
+        # the previous frame's selection may run one frame later (when fast motion is detected): keep the
+        # events of its window plus a margin of a few frame intervals
+        self._retain_ns = self._keep_ns + self.RETAIN_MARGIN_NS
+        self._recent: deque[EventBatch] = deque()
+        # raw pixel -> rectified pixel (rounded); -1 where the pixel leaves the pinhole image
+        u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+        xy = raw_camera.pixel_to_normalized(np.column_stack([u.ravel(), v.ravel()]))
+        pu = np.rint(self.camera.fx * xy[:, 0] + self.camera.cx)
+        pv = np.rint(self.camera.fy * xy[:, 1] + self.camera.cy)
+        inside = (pu >= 0) & (pu < self.camera.width) & (pv >= 0) & (pv < self.camera.height)
+        self._lut_x = np.where(inside, pu, -1).astype(np.int32)
+        self._lut_y = np.where(inside, pv, -1).astype(np.int32)
+        self._raw_w = w
+
+    @property
+    def n_levels(self) -> int:
+        return self.image.n_levels
+
+    def reset(self) -> None:
+        """Forget every event (the surface starts black)."""
+        self.surface.reset()
+        self._recent.clear()
+
+    def add_events(self, batch: EventBatch) -> None:
+        """Fold a time-ordered batch into the surface; keep the last selection window for Eq. 3."""
+        if len(batch) == 0:
+            return
+        self.surface.update(batch)
+        self._recent.append(batch)
+        newest = batch.t_last_ns
+        while self._recent and self._recent[0].t_last_ns < newest - self._retain_ns:
+            self._recent.popleft()
+
+    def _recent_undistorted(self, t_ns: int) -> EventBatch:
+        """The selection window's events with coordinates on the pinhole grid (outside ones dropped)."""
+        if not self._recent:
+            return EventBatch.empty()
+        ev = EventBatch.concatenate(list(self._recent))
+        ev = ev.select((ev.t > t_ns - self._keep_ns) & (ev.t <= t_ns) & (ev.x < self._raw_w)
+                       & (ev.y < len(self._lut_x) // self._raw_w))
+        lin = ev.y.astype(np.int64) * self._raw_w + ev.x.astype(np.int64)
+        x, y = self._lut_x[lin], self._lut_y[lin]
+        keep = x >= 0
+        return EventBatch(x[keep], y[keep], ev.t[keep], ev.p[keep], self.camera.width, self.camera.height)
+
+    def render(self, t_ns: int) -> EventFrame:
+        """The surface at ``t_ns`` on the pinhole grid and its pyramid (no pixels selected yet)."""
+        img = self.image.rectify(self.surface.render(int(t_ns)))
+        return EventFrame(int(t_ns), img, self.image.pyramid(img), np.zeros((0, 2), np.int64), 0)
+
+    def select(self, frame: EventFrame) -> EventFrame:
+        """``frame`` with the pixels of Section II-B (Eq. 3) on its surface, from the recent events."""
+        recent = self._recent_undistorted(frame.stamp_ns)
+        sel = (select_event_pixels(frame.surface, recent, frame.stamp_ns, self._window_ns,
+                                   self.config.event_selection) if len(recent) else np.zeros((0, 2), np.int64))
+        return dataclasses.replace(frame, selected=sel, n_events=len(recent))
+
+
+__all__ = ["EventFrame", "EventFrontEnd"]
