@@ -127,3 +127,24 @@ def integrate_gyro(batch: ImuBatch, t0_ns: int, t1_ns: int, bias_rad_s: np.ndarr
 
 
 __all__ = ["ImuBatch", "integrate_gyro", "interpolate_gyro"]
+
+
+def gyro_rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns: int = 30_000_000) -> np.ndarray:
+    """:func:`integrate_gyro` from ``t0_ns`` to ``t1_ns``, holding the first/last rate for up to ``max_extrapolation_ns``.
+
+    A frame is often processed before the IMU sample after its stamp has arrived (at 200 Hz the last one
+    is up to 5 ms old, plus transport), and the first frame may precede the first sample; over a few
+    milliseconds the rate barely changes. Raises :class:`ImuError` when the samples miss the interval by more.
+    """
+    t0_ns, t1_ns = int(t0_ns), int(t1_ns)
+    if len(batch) == 0:
+        raise ImuError("no IMU samples to integrate")
+    a, b = max(t0_ns, batch.t_first_ns), min(t1_ns, batch.t_last_ns)
+    if a - t0_ns > max_extrapolation_ns or t1_ns - b > max_extrapolation_ns or a > b:
+        return integrate_gyro(batch, t0_ns, t1_ns)  # raises with the spans
+    R = integrate_gyro(batch, a, b)
+    if a > t0_ns:
+        R = so3_exp(batch.gyro_rad_s[0] * ((a - t0_ns) * 1e-9)) @ R
+    if t1_ns > b:
+        R = R @ so3_exp(batch.gyro_rad_s[-1] * ((t1_ns - b) * 1e-9))
+    return project_to_so3(R)

@@ -31,7 +31,7 @@ from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
 from atsvo_ros.core.frontend import PreparedFrame, RgbdFrontEnd
 from atsvo_ros.core.geometry import hat, se3_exp, se3_inv, so3_log
-from atsvo_ros.core.imu import ImuBatch, integrate_gyro
+from atsvo_ros.core.imu import ImuBatch, gyro_rotation
 from atsvo_ros.core.mapper import EventMapRequest, KeyframeRequest, Mapper
 from atsvo_ros.core.motion import MotionModel
 from atsvo_ros.core.residuals import RollingShutter
@@ -132,7 +132,7 @@ class Odometry:
         predicted = self.motion.predict(stamp)
         ev_frame = self.events.render(stamp) if self.events is not None else None
         if not self.tracking.has_map:
-            return self._initialise(prepared, stamp, predicted, t0, note)
+            return self._initialise(prepared, stamp, predicted, t0, note, ev_frame)
         gyro = self._gyro_prediction(stamp)
         fast = self._is_fast()
         guesses = [predicted] if gyro is None else [gyro, predicted]
@@ -158,8 +158,7 @@ class Odometry:
             out = self._relocalise(prepared, guesses[0], last, rs, gyro, ev_frame)
             if out is None:
                 self.last_loss_reason = reason
-                self._prev_event = None
-                return self._reinitialise(prepared, stamp, predicted, t0, reason)
+                return self._reinitialise(prepared, stamp, predicted, t0, reason, ev_frame)
             status = TrackingStatus.RELOCALISED
         t_track = time.perf_counter() - t0
         self.last_loss_reason = out.verdict.reason or note
@@ -205,7 +204,7 @@ class Odometry:
         if last is None or not self._imu:
             return None
         try:
-            R_i0_i1 = integrate_gyro(ImuBatch.concatenate(list(self._imu)), last[0], stamp)
+            R_i0_i1 = gyro_rotation(ImuBatch.concatenate(list(self._imu)), last[0], stamp)
         except ImuError:
             return None
         R_c0_c1 = self.R_rgb_imu @ R_i0_i1 @ self.R_rgb_imu.T
@@ -234,7 +233,7 @@ class Odometry:
         hist = self.motion.history
         if self._imu and len(hist) == 2:
             try:
-                R = integrate_gyro(ImuBatch.concatenate(list(self._imu)), hist[0][0], hist[1][0])
+                R = gyro_rotation(ImuBatch.concatenate(list(self._imu)), hist[0][0], hist[1][0])
                 ang = float(np.linalg.norm(so3_log(R))) / max((hist[1][0] - hist[0][0]) * 1e-9, 1e-9)
             except ImuError:
                 pass
@@ -261,7 +260,7 @@ class Odometry:
         return self.mapper.n_keyframes - before
 
     def _initialise(self, prepared: PreparedFrame, stamp: int, T_c_w: np.ndarray, t0: float,
-                    note: str | None) -> OdometryResult:
+                    note: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
         first = self.mapper.n_keyframes == 0  # never had a map: still initialising (e.g. no depth yet)
         t_track = time.perf_counter() - t0
         ok = self._insert(Tracking.reset_request(prepared, T_c_w)) > 0 and self.tracking.has_map
@@ -275,10 +274,12 @@ class Odometry:
                                      "and rig.depth_min_m / depth_max_m)" if prepared.n_valid_depth == 0
                                      else "no map point could be selected in this frame (no texture?)")
         self.motion.push(stamp, T_c_w)
+        if ev_frame is not None:
+            self._prev_event = (ev_frame, prepared.depth_m, T_c_w)
         return self._result(stamp, T_c_w, None, status, t_track, ok)
 
     def _reinitialise(self, prepared: PreparedFrame, stamp: int, predicted: np.ndarray, t0: float,
-                      reason: str | None) -> OdometryResult:
+                      reason: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
         """Tracking and relocalisation failed: a new map from this frame at the predicted pose (no jump, no NaN)."""
         t_track = time.perf_counter() - t0
         ok = self._insert(Tracking.reset_request(prepared, predicted)) > 0 and self.tracking.has_map
@@ -286,6 +287,8 @@ class Odometry:
             self._affine = (0.0, 0.0)
         self.motion.reset()
         self.motion.push(stamp, predicted)
+        # the new map and this frame's event surface share the predicted pose: a consistent base for the next
+        self._prev_event = (ev_frame, prepared.depth_m, predicted) if ok and ev_frame is not None else None
         status = TrackingStatus.REINITIALISED if ok else TrackingStatus.LOST
         self.last_loss_reason = reason
         return self._result(stamp, predicted, None, status, t_track, ok)

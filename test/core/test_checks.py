@@ -41,8 +41,8 @@ def test_a_good_estimate_is_ok():
     ({"res": _result(covariance=np.eye(6) * 0.01)}, LOST, "degenerate"),
     ({"aff": ((0.0, 0.0), (np.log(3.0), 0.0))}, LOST, "gain"),
     ({"T": se3_exp(np.array([0.8, 0, 0, 0, 0, 0]))}, LOST, "jump"),
-    ({"zncc": 0.1}, LOST, "ZNCC"),
-    ({"zncc": 0.4}, DEGRADED, "ZNCC"),
+    ({"zncc": 0.1}, LOST, "ZNCC"),  # below lost_zncc 0.15
+    ({"zncc": 0.25}, DEGRADED, "ZNCC"),  # below min_zncc 0.3
     ({"gyro": se3_exp(np.array([0, 0, 0, 0.0, 0.06, 0]))}, DEGRADED, "gyro"),
     ({"res": _result(blocks={"rgb": BlockStats(1000, 1000, 900, 1, 1, 1),
                              "depth": BlockStats(800, 700, 100, 1, 1, 1)})}, DEGRADED, "depth term"),

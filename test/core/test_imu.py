@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from atsvo_ros.core.geometry import rotation_angle_rad, so3_exp
+from atsvo_ros.core.geometry import rotation_angle_rad, so3_exp, so3_log
 from atsvo_ros.core.imu import ImuBatch, integrate_gyro, interpolate_gyro
 from atsvo_ros.errors import ImuError
 
@@ -92,3 +92,17 @@ def test_integration_needs_covering_sorted_samples():
     shuffled = b.select(np.r_[1, 0, 2:len(b)])
     with pytest.raises(ImuError, match="must not decrease"):
         integrate_gyro(shuffled, 10_000_000, 20_000_000)
+
+
+def test_gyro_rotation_holds_the_last_rate_briefly():
+    from atsvo_ros.core.imu import gyro_rotation
+
+    w = np.array([0.0, 2.0, 0.0])
+    stamps = np.arange(0, 100_000_001, 5_000_000, dtype=np.int64)
+    batch = ImuBatch(stamps, np.tile(w, (len(stamps), 1)), np.zeros((len(stamps), 3)))
+    R = gyro_rotation(batch, 50_000_000, 103_000_000)  # 3 ms past the last sample
+    assert np.allclose(so3_log(R), w * 0.053, atol=1e-9)
+    R = gyro_rotation(batch, -2_000_000, 30_000_000)  # 2 ms before the first one
+    assert np.allclose(so3_log(R), w * 0.032, atol=1e-9)
+    with pytest.raises(ImuError):
+        gyro_rotation(batch, 50_000_000, 140_000_000)  # 40 ms past it: not extrapolated
