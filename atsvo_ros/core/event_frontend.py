@@ -20,6 +20,7 @@ from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.frontend import ImageFrontEnd
+from atsvo_ros.core.selection._event_kernels import _event_pixels
 from atsvo_ros.core.selection.events import select_event_pixels
 from atsvo_ros.core.time_surface import make_time_surface
 
@@ -32,7 +33,7 @@ class EventFrame:
     surface: np.ndarray  # float32 0-255 on the pinhole grid
     pyramid: list[np.ndarray]  # per level (H, W, 3) float32 [I, Ix, Iy]
     selected: np.ndarray  # (N, 2) int pixel positions (pinhole grid), best first
-    n_events: int  # events in the selection window
+    n_events: int  # pixels that fired in the selection window
 
 
 class EventFrontEnd:
@@ -62,7 +63,7 @@ class EventFrontEnd:
         inside = (pu >= 0) & (pu < self.camera.width) & (pv >= 0) & (pv < self.camera.height)
         self._lut_x = np.where(inside, pu, -1).astype(np.int32)
         self._lut_y = np.where(inside, pv, -1).astype(np.int32)
-        self._raw_w = w
+        self._raw_w, self._raw_h = w, h
 
     @property
     def n_levels(self) -> int:
@@ -83,17 +84,15 @@ class EventFrontEnd:
         while self._recent and self._recent[0].t_last_ns < newest - self._retain_ns:
             self._recent.popleft()
 
-    def _recent_undistorted(self, t_ns: int) -> EventBatch:
-        """The selection window's events with coordinates on the pinhole grid (outside ones dropped)."""
-        if not self._recent:
-            return EventBatch.empty()
-        ev = EventBatch.concatenate(list(self._recent))
-        ev = ev.select((ev.t > t_ns - self._keep_ns) & (ev.t <= t_ns) & (ev.x < self._raw_w)
-                       & (ev.y < len(self._lut_x) // self._raw_w))
-        lin = ev.y.astype(np.int64) * self._raw_w + ev.x.astype(np.int64)
-        x, y = self._lut_x[lin], self._lut_y[lin]
-        keep = x >= 0
-        return EventBatch(x[keep], y[keep], ev.t[keep], ev.p[keep], self.camera.width, self.camera.height)
+    def recent_pixels(self, t_ns: int) -> np.ndarray:
+        """Bool image (pinhole grid) of the pixels hit in the selection window before ``t_ns``, undistorted."""
+        out = np.zeros((self.camera.height, self.camera.width), np.bool_)
+        t_from = int(t_ns) - self._keep_ns
+        for b in self._recent:
+            if b.t_last_ns > t_from and b.t_first_ns <= t_ns:
+                _event_pixels(b.x, b.y, b.t, t_from, int(t_ns), self._lut_x, self._lut_y, self._raw_w, self._raw_h,
+                              out)
+        return out
 
     def render(self, t_ns: int) -> EventFrame:
         """The surface at ``t_ns`` on the pinhole grid and its pyramid (no pixels selected yet)."""
@@ -102,10 +101,9 @@ class EventFrontEnd:
 
     def select(self, frame: EventFrame) -> EventFrame:
         """``frame`` with the pixels of Section II-B (Eq. 3) on its surface, from the recent events."""
-        recent = self._recent_undistorted(frame.stamp_ns)
-        sel = (select_event_pixels(frame.surface, recent, frame.stamp_ns, self._window_ns,
-                                   self.config.event_selection) if len(recent) else np.zeros((0, 2), np.int64))
-        return dataclasses.replace(frame, selected=sel, n_events=len(recent))
+        fired = self.recent_pixels(frame.stamp_ns)
+        sel = select_event_pixels(frame.surface, fired, frame.stamp_ns, self._window_ns, self.config.event_selection)
+        return dataclasses.replace(frame, selected=sel, n_events=int(np.count_nonzero(fired)))
 
 
 __all__ = ["EventFrame", "EventFrontEnd"]

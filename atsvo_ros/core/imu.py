@@ -130,7 +130,7 @@ __all__ = ["ImuBatch", "integrate_gyro", "interpolate_gyro"]
 
 
 def gyro_rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns: int = 30_000_000) -> np.ndarray:
-    """:func:`integrate_gyro` from ``t0_ns`` to ``t1_ns``, holding the first/last rate for up to ``max_extrapolation_ns``.
+    """:func:`integrate_gyro` from ``t0_ns`` to ``t1_ns``, holding the first/last rate up to ``max_extrapolation_ns``.
 
     A frame is often processed before the IMU sample after its stamp has arrived (at 200 Hz the last one
     is up to 5 ms old, plus transport), and the first frame may precede the first sample; over a few

@@ -39,6 +39,18 @@ from atsvo_ros.core.tracking import Tracking, TrackingOutcome, rotation_hypothes
 from atsvo_ros.errors import ImuError
 
 
+def _best_attempt(attempts: list[tuple[TrackingOutcome, bool, TrackingStatus]]
+                  ) -> tuple[TrackingOutcome, bool, TrackingStatus] | None:
+    """The first trusted attempt; else the degraded one whose patches match best; None if every one is lost."""
+    for a in attempts:
+        if a[0].verdict.level == OK:
+            return a
+    degraded = [(a[0], a[1], TrackingStatus.DEGRADED) for a in attempts if a[0].verdict.level == DEGRADED]
+    if not degraded:
+        return None
+    return max(degraded, key=lambda a: -1.0 if np.isnan(a[0].zncc) else a[0].zncc)
+
+
 def _adjoint(T: np.ndarray) -> np.ndarray:
     """Adjoint of a pose acting on twists (translation first)."""
     R, t = T[:3, :3], T[:3, 3]
@@ -82,6 +94,8 @@ class Odometry:
         self._event_time_s = 0.0  # ATS updates since the last frame (counted in its tracking time)
         # the previous frame's event surface, depth and pose: what a temporary event map is built from
         self._prev_event: tuple[EventFrame, np.ndarray, np.ndarray] | None = None
+        self._events_since_frame = 0
+        self._events_per_frame: deque[int] = deque(maxlen=2)
         self._imu: deque[ImuBatch] = deque()
         self._affine = (0.0, 0.0)
         self._last_stamp: int | None = None
@@ -106,6 +120,7 @@ class Odometry:
             return
         t0 = time.perf_counter()
         self.events.add_events(batch)
+        self._events_since_frame += len(batch)
         self._event_time_s += time.perf_counter() - t0
 
     def add_imu(self, batch: ImuBatch) -> None:
@@ -123,6 +138,7 @@ class Odometry:
         # the event surface's updates since the last frame count towards this frame's tracking time
         t0 = time.perf_counter() - self._event_time_s
         self._event_time_s = 0.0
+        n_events = self._events_since_frame
         # Internally a frame lives at the time its image was exposed (middle row); the pose is published
         # at the stamp (see _result).
         stamp = int(frame.stamp_ns) + self._offset_ns
@@ -132,34 +148,36 @@ class Odometry:
         predicted = self.motion.predict(stamp)
         ev_frame = self.events.render(stamp) if self.events is not None else None
         if not self.tracking.has_map:
+            self._end_frame(n_events)
             return self._initialise(prepared, stamp, predicted, t0, note, ev_frame)
         gyro = self._gyro_prediction(stamp)
         fast = self._is_fast()
-        guesses = [predicted] if gyro is None else [gyro, predicted]
-        if self.motion.last is not None and not np.allclose(self.motion.last[1], predicted):
-            guesses.append(self.motion.last[1])  # zero motion
-            if gyro is None and fast:
-                guesses += [self.motion.predict_scaled(stamp, k) for k in self.config.tracker.velocity_scales]
+        guesses = self._guesses(stamp, predicted, gyro, fast)
         last = self.motion.last[1] if self.motion.last else predicted
         rs = self._rolling_shutter(stamp)
         # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
         self.tracking.set_event_map(self._event_map() if fast else None)
         fused = self.tracking.uses_events(ev_frame)
         out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
-        if out.verdict.level not in (OK, DEGRADED) and not fused and self._prev_event is not None:
-            # RGB-D alone could not hold the pose (a sudden push-off from a standstill): the events saw the motion
-            self.tracking.set_event_map(self._event_map())
-            if self.tracking.uses_events(ev_frame):
-                fused = True
-                out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
-        status = TrackingStatus.OK if out.verdict.level == OK else TrackingStatus.DEGRADED
-        if out.verdict.level not in (OK, DEGRADED):
-            reason = out.verdict.reason
-            out = self._relocalise(prepared, guesses[0], last, rs, gyro, ev_frame)
-            if out is None:
-                self.last_loss_reason = reason
-                return self._reinitialise(prepared, stamp, predicted, t0, reason, ev_frame)
-            status = TrackingStatus.RELOCALISED
+        status = TrackingStatus.OK
+        if out.verdict.level != OK:
+            # Not trusted: try harder before accepting a degraded pose or starting a new map.
+            attempts = [(out, fused, TrackingStatus.DEGRADED)]
+            if not fused and self._prev_event is not None:
+                # RGB-D alone could not hold the pose (a sudden push-off): the events saw the motion
+                self.tracking.set_event_map(self._event_map())
+                if self.tracking.uses_events(ev_frame):
+                    retry = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
+                    attempts.append((retry, True, TrackingStatus.DEGRADED))
+            if all(a[0].verdict.level != OK for a in attempts):
+                reloc = self._relocalise(prepared, guesses[0], last, rs, gyro, ev_frame)
+                attempts.append((reloc, self.tracking.uses_events(ev_frame), TrackingStatus.RELOCALISED))
+            best = _best_attempt(attempts)
+            if best is None:
+                self.last_loss_reason = out.verdict.reason
+                self._end_frame(n_events)
+                return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame)
+            out, fused, status = best
         t_track = time.perf_counter() - t0
         self.last_loss_reason = out.verdict.reason or note
         kf = False
@@ -170,7 +188,12 @@ class Odometry:
         self.motion.push(stamp, out.T_c_w)
         if ev_frame is not None:
             self._prev_event = (ev_frame, prepared.depth_m, out.T_c_w)
+        self._end_frame(n_events)
         return self._result(stamp, out.T_c_w, out, status, t_track, kf, fused)
+
+    def _end_frame(self, n_events: int) -> None:
+        self._events_per_frame.append(n_events)
+        self._events_since_frame = 0
 
     # ------------------------------------------------------------------ steps
     def _check_clock(self, stamp: int) -> str | None:
@@ -210,15 +233,37 @@ class Odometry:
         R_c0_c1 = self.R_rgb_imu @ R_i0_i1 @ self.R_rgb_imu.T
         return self.motion.predict_with_rotation(stamp, R_c0_c1.T)
 
+    def _guesses(self, stamp: int, predicted: np.ndarray, gyro: np.ndarray | None, fast: bool) -> list[np.ndarray]:
+        """Starting points: the gyro's prediction (with an IMU), constant motion, zero motion, and while the
+        camera turns fast (or the events say it speeds up) the constant motion scaled."""
+        guesses = [predicted] if gyro is None else [gyro, predicted]
+        if self.motion.last is None or np.allclose(self.motion.last[1], predicted):
+            return guesses
+        guesses.append(self.motion.last[1])  # zero motion
+        if gyro is not None:
+            return guesses
+        scales = list(self.config.tracker.velocity_scales) if fast else []
+        ratio = self._event_rate_ratio()
+        if ratio is not None and ratio > 1.5:
+            # Events per frame grow with the image motion: a surge of events says the turn sped up.
+            scales += [0.75 * ratio, ratio, 1.25 * ratio]
+        return guesses + [self.motion.predict_scaled(stamp, k) for k in scales]
+
+    def _event_rate_ratio(self) -> float | None:
+        """Events since the last frame over events in the frame interval before (None without both)."""
+        if len(self._events_per_frame) < 2 or self._events_per_frame[-2] < 1000:
+            return None
+        return float(np.clip(self._events_since_frame / self._events_per_frame[-1], 0.2, 8.0)) \
+            if self._events_per_frame[-1] > 0 else None
+
     def _relocalise(self, prepared: PreparedFrame, predicted: np.ndarray, last: np.ndarray,
                     rs: RollingShutter | None, gyro: np.ndarray | None,
-                    ev_frame: EventFrame | None) -> TrackingOutcome | None:
+                    ev_frame: EventFrame | None) -> TrackingOutcome:
         """Track again from wider starting points: the recent keyframes' poses and doubled rotation hypotheses."""
         cfg = self.config.tracker
         guesses = [predicted, *(se3_inv(kf.T_w_c) for kf in reversed(self.tracking.snapshot.keyframes[-3:]))]
         guesses += rotation_hypotheses(predicted, max(2.0 * cfg.rotation_hypotheses_deg, 4.0))
-        out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
-        return out if out.verdict.level == OK else None
+        return self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
 
     def motion_rates(self) -> tuple[float, float] | None:
         """The paper's relative-motion factor: camera angular rate (rad/s) and speed (m/s) over the last two frames.

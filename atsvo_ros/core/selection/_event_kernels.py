@@ -34,3 +34,29 @@ def _thin(xs: np.ndarray, ys: np.ndarray, order: np.ndarray, d: int, width: int,
             keep[k] = i
             k += 1
     return keep[:k]
+
+
+@njit(cache=True)
+def _event_pixels(x, y, t, t_from, t_to, lut_x, lut_y, raw_w, raw_h, out):  # pragma: no cover - compiled
+    """Mark in ``out`` (bool, target grid) the pixels of events with ``t_from < t <= t_to``.
+
+    ``lut_x``/``lut_y`` (flat over the raw sensor, -1 = off the target grid) map raw pixels to target
+    pixels, so undistortion and the duplicate removal of a ``np.unique`` happen in one O(events) pass.
+    Returns the number of events marked.
+    """
+    n = 0
+    for i in range(t.shape[0]):
+        ti = t[i]
+        if ti <= t_from or ti > t_to:
+            continue
+        xi = np.int64(x[i])
+        yi = np.int64(y[i])
+        if xi >= raw_w or yi >= raw_h:
+            continue
+        k = yi * raw_w + xi
+        u = lut_x[k]
+        if u < 0:
+            continue
+        out[lut_y[k], u] = True
+        n += 1
+    return n

@@ -23,7 +23,7 @@ import numpy as np
 
 from atsvo_ros.config import EventSelectionConfig
 from atsvo_ros.core.events import EventBatch
-from atsvo_ros.core.selection._event_kernels import _thin
+from atsvo_ros.core.selection._event_kernels import _event_pixels, _thin
 from atsvo_ros.errors import ImageError
 
 
@@ -52,21 +52,48 @@ def gradient_magnitude(img: np.ndarray) -> np.ndarray:
     return np.sqrt(gx * gx + gy * gy)
 
 
-def select_event_pixels_detailed(ats: np.ndarray, events: EventBatch, t_ns: int, window_ns: int,
+def event_pixel_mask(events: EventBatch, t_from_ns: int, t_to_ns: int, shape: tuple[int, int],
+                     lut: tuple[np.ndarray, np.ndarray] | None = None, raw_size: tuple[int, int] | None = None
+                     ) -> np.ndarray:
+    """Bool image of the pixels hit by events with ``t_from < t <= t_to`` (O(events), no sort).
+
+    ``lut`` = flat ``(x, y)`` maps from raw sensor pixels (``raw_size`` = width, height) to pixels of
+    ``shape`` (-1 = outside), e.g. the undistortion onto the rectified grid; without it events are
+    taken on ``shape`` as they are.
+    """
+    h, w = shape
+    out = np.zeros((h, w), np.bool_)
+    if len(events) == 0:
+        return out
+    if lut is None:
+        lin = np.arange(w * h, dtype=np.int32)
+        lut = (lin % w, lin // w)
+        raw_size = (w, h)
+    _event_pixels(events.x, events.y, events.t, int(t_from_ns), int(t_to_ns), lut[0], lut[1], int(raw_size[0]),
+                  int(raw_size[1]), out)
+    return out
+
+
+def select_event_pixels_detailed(ats: np.ndarray, events: EventBatch | np.ndarray, t_ns: int, window_ns: int,
                                  cfg: EventSelectionConfig | None = None) -> EventSelection:
-    """Run the whole selection and keep every intermediate result."""
+    """Run the whole selection and keep every intermediate result.
+
+    ``events`` is an EventBatch on the ATS grid, or already a bool image of the pixels that fired in the
+    candidate window (:func:`event_pixel_mask`).
+    """
     cfg = cfg or EventSelectionConfig()
     if ats.ndim != 2:
         raise ImageError(f"the ATS must be a 2-D image, got shape {ats.shape}")
     h, w = ats.shape
     mask = ats_mask(ats, cfg.mask_median_ksize)
-    t0 = int(t_ns) - int(round(cfg.window_fraction * window_ns))
-    recent = (events.t > t0) & (events.t <= int(t_ns)) & (events.x < w) & (events.y < h)
-    if np.any(recent):
-        lin = np.unique(events.y[recent].astype(np.int64) * w + events.x[recent].astype(np.int64))
+    if isinstance(events, np.ndarray):
+        if events.shape != (h, w):
+            raise ImageError(f"event pixel mask {events.shape} does not match the ATS {ats.shape}")
+        fired = events
     else:
-        lin = np.zeros(0, np.int64)
-    cx, cy = lin % w, lin // w
+        t0 = int(t_ns) - int(round(cfg.window_fraction * window_ns))
+        fired = event_pixel_mask(events, t0, int(t_ns), (h, w))
+    cy, cx = np.nonzero(fired)
     on_mask = mask[cy, cx]
     score = ats[cy, cx].astype(np.float32) + np.float32(cfg.alpha) * gradient_magnitude(ats)[cy, cx]
     b = cfg.border_px
@@ -79,13 +106,14 @@ def select_event_pixels_detailed(ats: np.ndarray, events: EventBatch, t_ns: int,
     return EventSelection(mask, np.stack([cx, cy], axis=1), on_mask, score, passed, selected)
 
 
-def select_event_pixels(ats: np.ndarray, events: EventBatch, t_ns: int, window_ns: int,
+def select_event_pixels(ats: np.ndarray, events: EventBatch | np.ndarray, t_ns: int, window_ns: int,
                         cfg: EventSelectionConfig | None = None) -> np.ndarray:
     """Selected pixels ``(N, 2)`` as integer ``(x, y)``, best score first.
 
     Args:
         ats: the rendered ATS (float 0..255) at ``t_ns``.
-        events: recent events (at least the last ``window_fraction * window_ns``; older ones are ignored).
+        events: recent events (at least the last ``window_fraction * window_ns``; older ones are ignored),
+            or the bool image of the pixels they hit (:func:`event_pixel_mask`).
         t_ns: the ATS time.
         window_ns: the ATS window (``TimeSurface.window_ns()``).
         cfg: Eq. 3 parameters.
