@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 
@@ -33,6 +34,7 @@ from atsvo_ros.core.frontend import PreparedFrame, RgbdFrontEnd
 from atsvo_ros.core.geometry import hat, se3_exp, se3_inv, so3_log
 from atsvo_ros.core.imu import ImuBatch, gyro_rotation
 from atsvo_ros.core.mapper import EventMapRequest, KeyframeRequest, Mapper
+from atsvo_ros.core.mapping_port import InlineMapping, MappingPort
 from atsvo_ros.core.motion import MotionModel
 from atsvo_ros.core.residuals import RollingShutter
 from atsvo_ros.core.tracking import Tracking, TrackingOutcome, rotation_hypotheses
@@ -70,7 +72,9 @@ class Odometry:
     MAX_GAP_S = 1.0
     _BUFFER_NS = 1_000_000_000
 
-    def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel, event_camera: CameraModel | None = None) -> None:
+    def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel, event_camera: CameraModel | None = None,
+                 mapping: Callable[[Mapper], MappingPort] | None = None) -> None:
+        """``mapping`` wraps the mapper into the port tracking talks to (default: :class:`InlineMapping`)."""
         self.config = config
         self.raw_camera = rgb_camera
         self.frontend = RgbdFrontEnd(rgb_camera, config.tracker.pyramid_levels, config.rig.depth_min_m,
@@ -91,6 +95,7 @@ class Odometry:
         T_event_rgb = se3_inv(config.rig.T_rgb_event_matrix())
         self.tracking = Tracking(config, self.cameras, event_cams, T_event_rgb)
         self.mapper = Mapper(config, self.cameras, None if self.events is None else self.events.camera)
+        self.mapping: MappingPort = (mapping or InlineMapping)(self.mapper)
         self._event_time_s = 0.0  # ATS updates since the last frame (counted in its tracking time)
         # the previous frame's event surface, depth and pose: what a temporary event map is built from
         self._prev_event: tuple[EventFrame, np.ndarray, np.ndarray] | None = None
@@ -106,12 +111,16 @@ class Odometry:
     @property
     def n_keyframes(self) -> int:
         """Keyframes inserted since construction (re-initialisations included)."""
-        return self.mapper.n_keyframes
+        return self.mapping.n_keyframes
 
     @property
     def map(self):
         """The snapshot tracking currently reads."""
         return self.tracking.snapshot
+
+    def close(self) -> None:
+        """Stop the mapping worker, if any (the inline mapping has none)."""
+        self.mapping.close()
 
     # ------------------------------------------------------------------ inputs
     def add_events(self, batch: EventBatch) -> None:
@@ -143,6 +152,9 @@ class Odometry:
         # at the stamp (see _result).
         stamp = int(frame.stamp_ns) + self._offset_ns
         prepared = self.frontend.prepare(frame)
+        newer = self.mapping.latest()  # a keyframe mapping finished meanwhile (threaded or remote mapping)
+        if newer is not None:
+            self.tracking.set_snapshot(newer)
         note = self._check_clock(stamp)
         self._last_stamp = stamp
         predicted = self.motion.predict(stamp)
@@ -184,7 +196,7 @@ class Odometry:
         if status is not TrackingStatus.DEGRADED:
             self._affine = out.affine
             if out.health is not None and out.health.needs_keyframe:
-                kf = self._insert(self.tracking.keyframe_request(prepared, out, rs)) > 0
+                kf = self._insert(self.tracking.keyframe_request(prepared, out, rs))
         self.motion.push(stamp, out.T_c_w)
         if ev_frame is not None:
             self._prev_event = (ev_frame, prepared.depth_m, out.T_c_w)
@@ -296,19 +308,22 @@ class Odometry:
         if self._prev_event is None:
             return None
         ev_frame, depth, T_c_w = self._prev_event
-        return self.mapper.build_event_map(EventMapRequest(self.events.select(ev_frame), depth, T_c_w))
+        return self.mapping.event_map(EventMapRequest(self.events.select(ev_frame), depth, T_c_w))
 
-    def _insert(self, request: KeyframeRequest) -> int:
-        """Mapping, synchronously: insert the keyframe and track against the new snapshot from now on."""
-        before = self.mapper.n_keyframes
-        self.tracking.set_snapshot(self.mapper.insert(request))
-        return self.mapper.n_keyframes - before
+    def _insert(self, request: KeyframeRequest) -> bool:
+        """Ask mapping for a keyframe (one at a time; a reset waits for its answer); True when it was asked."""
+        if not request.reset and self.mapping.busy():
+            return False
+        snap = self.mapping.insert(request, wait=request.reset)
+        if snap is not None:
+            self.tracking.set_snapshot(snap)
+        return True
 
     def _initialise(self, prepared: PreparedFrame, stamp: int, T_c_w: np.ndarray, t0: float,
                     note: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
-        first = self.mapper.n_keyframes == 0  # never had a map: still initialising (e.g. no depth yet)
+        first = self.mapping.n_keyframes == 0  # never had a map: still initialising (e.g. no depth yet)
         t_track = time.perf_counter() - t0
-        ok = self._insert(Tracking.reset_request(prepared, T_c_w)) > 0 and self.tracking.has_map
+        ok = self._insert(Tracking.reset_request(prepared, T_c_w)) and self.tracking.has_map
         if ok:
             self._affine = (0.0, 0.0)
             status = TrackingStatus.INITIALISING if first else TrackingStatus.REINITIALISED
@@ -327,7 +342,7 @@ class Odometry:
                       reason: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
         """Tracking and relocalisation failed: a new map from this frame at the predicted pose (no jump, no NaN)."""
         t_track = time.perf_counter() - t0
-        ok = self._insert(Tracking.reset_request(prepared, predicted)) > 0 and self.tracking.has_map
+        ok = self._insert(Tracking.reset_request(prepared, predicted)) and self.tracking.has_map
         if ok:
             self._affine = (0.0, 0.0)
         self.motion.reset()
