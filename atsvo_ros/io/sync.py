@@ -19,12 +19,7 @@ import numpy as np
 
 from atsvo_ros.config import RigConfig
 from atsvo_ros.core.events import EventBatch
-
-
-def _frame_class() -> Any:
-    from atsvo_ros.core.odometry import RgbdFrame
-
-    return RgbdFrame
+from atsvo_ros.core.frame import RgbdFrame
 
 
 @dataclass
@@ -36,10 +31,15 @@ class SyncStats:
     dropped_depth: int = 0
     released_without_events: int = 0
     late_events: int = 0
+    clock_jumps: int = 0
 
 
 class FrameAssembler:
     """Incremental RGB/depth pairing and event cutting (see the module docstring)."""
+
+    #: Data this far behind the newest stamp seen is a clock jump (a bag loop, a simulator restart): the
+    #: assembler starts over instead of calling everything that follows late.
+    CLOCK_JUMP_NS = 1_000_000_000
 
     def __init__(self, rig: RigConfig, with_events: bool = True, max_event_wait_s: float = 0.25,
                  max_pending: int = 30) -> None:
@@ -83,6 +83,8 @@ class FrameAssembler:
 
     def add_events(self, batch: EventBatch, complete_to_ns: int | None = None) -> None:
         """Events in time order; ``complete_to_ns`` (e.g. the message stamp) says the stream reached it."""
+        if len(batch) and batch.t_first_ns < self._newest_ns - self.CLOCK_JUMP_NS:
+            self._restart_clock()
         if len(batch):
             if self._last_cut_ns is not None and batch.t_first_ns <= self._last_cut_ns:
                 late = batch.t <= self._last_cut_ns
@@ -133,7 +135,22 @@ class FrameAssembler:
         return len(self._rgb) + len(self._depth) + len(self._pairs)
 
     # ------------------------------------------------------------------ internals
+    def _restart_clock(self) -> None:
+        """The stamps jumped back: drop what is pending (it belongs to the old timeline) and start over."""
+        self.stats.clock_jumps += 1
+        self.stats.dropped_rgb += len(self._rgb) + len(self._pairs)
+        self.stats.dropped_depth += len(self._depth) + len(self._pairs)
+        self._rgb.clear()
+        self._depth.clear()
+        self._pairs.clear()
+        self._events = []
+        self._event_mark_ns = None
+        self._last_cut_ns = None
+        self._newest_ns = -(2**63)
+
     def _insert(self, q: deque, t: int, img: np.ndarray) -> None:
+        if t < self._newest_ns - self.CLOCK_JUMP_NS:
+            self._restart_clock()
         self._newest_ns = max(self._newest_ns, t)
         if q and q[-1][0] > t:  # out of order: keep the queue sorted
             items = sorted([*q, (t, img)], key=lambda x: x[0])
@@ -185,7 +202,7 @@ class FrameAssembler:
             self._events = [rest] if len(rest) else []
         self._last_cut_ns = t
         self.stats.frames += 1
-        return _frame_class()(stamp_ns=t, rgb=rgb, depth_m=depth), events
+        return RgbdFrame(stamp_ns=t, rgb=rgb, depth_m=depth), events
 
 
 __all__ = ["FrameAssembler", "SyncStats"]

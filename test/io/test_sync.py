@@ -1,32 +1,13 @@
 """FrameAssembler: RGB/depth pairing by stamp and event cutting at frame stamps, fed incrementally."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-import pytest
 
 from atsvo_ros.config import RigConfig
 from atsvo_ros.core.events import EventBatch
-from atsvo_ros.io import sync
 from atsvo_ros.io.sync import FrameAssembler
 
 MS = 1_000_000
-
-
-@dataclass(frozen=True)
-class _FrameDouble:  # test double, used only if the core's RgbdFrame is not importable
-    stamp_ns: int
-    rgb: np.ndarray
-    depth_m: np.ndarray
-
-
-@pytest.fixture(autouse=True)
-def _frame_class(monkeypatch):
-    try:
-        from atsvo_ros.core.odometry import RgbdFrame  # noqa: F401
-    except ImportError:
-        monkeypatch.setattr(sync, "_frame_class", lambda: _FrameDouble)
 
 
 def _img(v: int) -> np.ndarray:
@@ -117,3 +98,26 @@ def test_memory_is_bounded_when_depth_never_comes():
     for k in range(100):
         fa.add_rgb(k * 33 * MS, _img(0))
     assert fa.pending <= 11 and fa.stats.dropped_rgb >= 89
+
+
+def test_a_clock_jumping_back_starts_the_assembler_over():
+    """``ros2 bag play --loop`` or a simulator restart: the stamps jump back; frames and events carry on."""
+    asm = FrameAssembler(RigConfig(), with_events=True)
+    for k in range(3):  # frames at 3 s, 3.033 s, ...; events up to each frame
+        t = 3000 + 33 * k
+        asm.add_events(_events(t - 33, t))
+        asm.add_rgb(t * MS, _img(k))
+        asm.add_depth(t * MS, _dep(1.0))
+    asm.add_events(_events(3066, 3100))
+    first = asm.pop_ready()
+    assert len(first) == 3
+    for k in range(3):  # the clock restarts at 0.2 s
+        t = 200 + 33 * k
+        asm.add_events(_events(t - 33, t))
+        asm.add_rgb(t * MS, _img(10 + k))
+        asm.add_depth(t * MS, _dep(2.0))
+    asm.add_events(_events(266, 300))
+    again = asm.pop_ready()
+    assert [f.stamp_ns for f, _ in again] == [200 * MS, 233 * MS, 266 * MS]
+    assert all(len(ev) == 10 for _, ev in again[1:])  # the new timeline's events are not dropped as late
+    assert asm.stats.clock_jumps == 1 and asm.stats.late_events == 0
