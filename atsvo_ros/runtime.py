@@ -37,8 +37,6 @@ Logger = Callable[[str, str], None]  # (level: "info" | "warn" | "error", text)
 class OdometryCore(Protocol):
     """What the runtime needs from the core (:class:`atsvo_ros.core.odometry.Odometry`, or a test double)."""
 
-    supports_events: bool
-
     def process_frame(self, frame: RgbdFrame) -> OdometryResult: ...
 
     def add_events(self, batch: EventBatch) -> None: ...
@@ -78,9 +76,7 @@ class OdometryRuntime:
         self.config = config
         self._log = logger or _no_log
         self._factory = core_factory or _default_core()
-        supports = bool(getattr(self._factory, "supports_events", False))
-        wanted = config.mode == "fused" if use_events is None else use_events
-        self.use_events = wanted and supports
+        self.use_events = config.mode == "fused" if use_events is None else bool(use_events)
         self.counters: Counter[str] = Counter()
         #: the first message of each kind of problem (what :attr:`counters` counts), for summaries
         self.first_problem: dict[str, str] = {}
@@ -97,8 +93,6 @@ class OdometryRuntime:
         self._log_interval_s = float(log_interval_s)
         self._last_logged: dict[str, float] = {}
         self._logged_count: Counter[str] = Counter()
-        if wanted and not supports:
-            self._log("warn", "mode fused requested but the odometry core does not fuse events: RGB-D only")
 
     # ------------------------------------------------------------------ reporting
     def _problem(self, kind: str, text: str, level: str = "warn") -> None:

@@ -130,7 +130,6 @@ def test_events_reach_the_core_cut_at_frame_stamps_from_messages_or_raw_bytes(ba
     from atsvo_ros.core.odometry import Odometry
 
     class Recording(Odometry):
-        supports_events = True
 
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)

@@ -66,8 +66,6 @@ def _adjoint(T: np.ndarray) -> np.ndarray:
 class Odometry:
     """Direct RGB-D (+ event) odometry: Eq. 4 with the RGB, depth and, during fast motion, ATS terms."""
 
-    #: Events are fused when an event camera is given (mode fused).
-    supports_events: bool = True
     #: A gap between frames longer than this resets the motion model (constant motion is meaningless).
     MAX_GAP_S = 1.0
     _BUFFER_NS = 1_000_000_000

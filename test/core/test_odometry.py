@@ -39,7 +39,7 @@ def _err(T_est, T_gt):
 
 def test_first_frame_defines_odom_and_offsets_come_out_in_base_frame(room, config):
     odo = Odometry(config, CAM)
-    assert odo.supports_events and odo.events is None  # no event camera given: RGB-D only
+    assert odo.events is None  # no event camera given: RGB-D only
     T_b_c = config.rig.T_base_rgb_matrix()
     r0 = odo.process_frame(_frame(room, CAM, np.eye(4), 0))
     assert isinstance(r0, OdometryResult)

@@ -40,8 +40,17 @@ def gt_pose(t_s: float) -> np.ndarray:
 def write_bag(path: Path, fmt: str, n_frames: int = 6, hz: float = 30.0, t0_ns: int = 1_700_000_000_000_000_000,
               events: bool = True, gt: bool = True, depth: bool = True, rgb_encoding: str = "rgb8",
               size: tuple[int, int] = (32, 24), topics: dict[str, str] | None = None,
-              depth_delay_ns: int = 0, gt_hz: float = 100.0) -> Path:
-    """Write a tiny robot-layout bag; returns the path that the readers take."""
+              depth_delay_ns: int = 0, gt_hz: float = 100.0, depth_fill: float | None = None,
+              depth_encoding: str = "16UC1", rgb_fill: int | None = None,
+              faults: dict[int, str] | None = None) -> Path:
+    """Write a tiny robot-layout bag; returns the path that the readers take.
+
+    ``depth_fill`` replaces the depth ramp (1.5 m + 1 cm per frame) with one value in the encoding's unit
+    (mm for 16UC1, m for 32FC1); ``rgb_fill`` replaces the random colour with one grey level.
+    ``faults`` damages frames by index: "bad_encoding" (colour as bayer_rggb8), "duplicate" (colour and
+    depth written twice), "late" (stamped 3 frames earlier, as a frame stuck in a queue would be).
+    """
+    faults = faults or {}
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as Writer2
@@ -62,17 +71,25 @@ def write_bag(path: Path, fmt: str, n_frames: int = 6, hz: float = 30.0, t0_ns: 
     Image = ts.types["sensor_msgs/msg/Image"]
     dt_ns = int(1e9 / hz)
     for i in range(n_frames):
-        t = t0_ns + i * dt_ns
+        log_t = t0_ns + i * dt_ns
+        fault = faults.get(i)
+        t = log_t - 3 * dt_ns + dt_ns // 2 if fault == "late" else log_t
         chans = 1 if rgb_encoding in ("mono8",) else 3
         img = rng.integers(0, 255, (h, w * chans), dtype=np.uint8)
-        msgs.append((t + 1000, topics["rgb"], "sensor_msgs/msg/Image", ser(Image(
-            header=_header(ts, ros, t, "camera_color_optical_frame"), height=h, width=w, encoding=rgb_encoding,
-            is_bigendian=False, step=w * chans, data=img.reshape(-1)), "sensor_msgs/msg/Image")))
-        if depth:
-            d = np.full((h, w), 1500 + 10 * i, np.uint16)
-            msgs.append((t + 2000 + depth_delay_ns, topics["depth"], "sensor_msgs/msg/Image", ser(Image(
-                header=_header(ts, ros, t, "camera_color_optical_frame"), height=h, width=w, encoding="16UC1",
-                is_bigendian=False, step=2 * w, data=d.view(np.uint8).reshape(-1)), "sensor_msgs/msg/Image")))
+        if rgb_fill is not None:
+            img[:] = rgb_fill
+        for _ in range(2 if fault == "duplicate" else 1):
+            msgs.append((log_t + 1000, topics["rgb"], "sensor_msgs/msg/Image", ser(Image(
+                header=_header(ts, ros, t, "camera_color_optical_frame"), height=h, width=w,
+                encoding="bayer_rggb8" if fault == "bad_encoding" else rgb_encoding,
+                is_bigendian=False, step=w * chans, data=img.reshape(-1)), "sensor_msgs/msg/Image")))
+        for _ in range((2 if fault == "duplicate" else 1) if depth else 0):
+            dtype = np.uint16 if depth_encoding == "16UC1" else np.float32
+            d = np.full((h, w), 1500 + 10 * i if depth_fill is None else depth_fill, dtype)
+            msgs.append((log_t + 2000 + depth_delay_ns, topics["depth"], "sensor_msgs/msg/Image", ser(Image(
+                header=_header(ts, ros, t, "camera_color_optical_frame"), height=h, width=w,
+                encoding=depth_encoding, is_bigendian=False, step=d.itemsize * w,
+                data=d.view(np.uint8).reshape(-1)), "sensor_msgs/msg/Image")))
     if events:
         n_pk = int(n_frames * dt_ns / 1_000_000) + 2
         for k in range(n_pk):

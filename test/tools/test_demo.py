@@ -44,8 +44,7 @@ def test_demo_generates_once_and_prints_table(tmp_path, fake_world, capsys, monk
     assert demo_mod.sequence_path(tmp_path / "cache", "backflip", 2.5, 0).is_dir()
     out = capsys.readouterr().out
     assert "ATE [cm]" in out and "rgbd" in out
-    modes = demo_mod.pipeline_modes()
-    for mode in modes:
+    for mode in demo_mod.MODES:
         doc = json.loads((tmp_path / "out" / mode / "metrics.json").read_text())
         assert doc["n_matched"] == 8
         assert (tmp_path / "out" / mode / "trajectory.png").is_file()
@@ -74,7 +73,7 @@ def test_demo_end_to_end_with_the_real_simulator_and_odometry(tmp_path, capsys):
             "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out"), "--no-progress"]
     assert demo_mod.main(argv) == 0
     text = capsys.readouterr().out
-    for mode in demo_mod.pipeline_modes():
+    for mode in demo_mod.MODES:
         doc = json.loads((tmp_path / "out" / mode / "metrics.json").read_text())
         assert doc["n_matched"] >= 15
         # measured ATE 1.1 cm at 160x120 (17 cm when the tracker does not optimise); limit ~3x

@@ -24,7 +24,6 @@ T0 = 1_700_000_000_000_000_000
 class FakeOdometry:
     """Test double of atsvo_ros.core.odometry.Odometry: reports the known motion of write_bag."""
 
-    supports_events = True
     instances: list = []
 
     def __init__(self, config, rgb_camera, event_camera=None):
@@ -198,3 +197,38 @@ def test_slow_tracking_is_warned_about(tmp_path, fake):
     assert any(n.startswith("warning: tracking takes 200 ms") for n in res.notes), res.notes
     timing = json.loads((tmp_path / "out" / "timing.json").read_text())
     assert any("200 ms" in n for n in timing["notes"])
+
+
+@pytest.mark.parametrize(("case", "bag_args", "why"), [
+    ("depth all 0", {"depth_fill": 0}, "no valid depth"),
+    ("depth all NaN", {"depth_fill": float("nan"), "depth_encoding": "32FC1"}, "no valid depth"),
+    ("millimetres labelled metres", {"depth_fill": 1500.0, "depth_encoding": "32FC1"}, "encoding and scale"),
+    ("colour all black", {"rgb_fill": 0}, "no texture"),
+    ("colour all white", {"rgb_fill": 255}, "no texture"),
+])
+def test_a_replay_that_tracks_nothing_fails_and_says_why(tmp_path, capsys, case, bag_args, why):
+    """Probe 2 of issue 13: with the real core, untrackable input is exit 1 and one line naming the cause."""
+    bag = write_bag(tmp_path / "seq", "mcap", n_frames=4, size=(64, 48), **bag_args)
+    out = tmp_path / "out"
+    assert main([str(bag), "--out", str(out), "--mode", "rgbd", "--no-plots", "--no-progress"]) == 1, case
+    err = _one_line_error(capsys)
+    assert "not a single frame" in err and why in err, err
+    assert (out / "timing.json").is_file()  # what could be saved is saved
+
+
+def test_damaged_frames_are_skipped_counted_and_reported_not_fatal(tmp_path, capsys, fake):
+    """Probe 5 of issue 13: an undecodable image, a duplicated and a late frame; the rest is replayed."""
+    bag = write_bag(tmp_path / "seq", "mcap", n_frames=12, events=False,
+                    faults={3: "bad_encoding", 5: "duplicate", 8: "late"})
+    res = replay(bag, tmp_path / "out", load_config("synthetic"), mode="rgbd", odometry_factory=fake,
+                 plots=False, progress=False)
+    timing = json.loads((tmp_path / "out" / "timing.json").read_text())
+    counters = timing["counters"]
+    assert counters["images_rejected"] == 1 and counters["frames_duplicate"] == 1
+    assert counters["frames_out_of_order"] == 1 and counters["frames"] == 10  # 12 - undecodable - late
+    notes = "\n".join(res.notes)
+    for what in ("undecodable images skipped", "duplicated frames skipped", "out-of-order frames skipped"):
+        assert what in notes
+    assert "bayer_rggb8" in notes and "/camera/camera/color/image_raw" in notes  # topic and reason named
+    assert len(read_tum(tmp_path / "out" / "trajectory.tum")) == 10
+    assert res.metrics is not None
