@@ -207,6 +207,11 @@ class TrackerConfig:
                                           doc="rotation between the estimate and the gyro's prediction beyond which "
                                               "the frame is degraded (a wrong visual optimum)")
     degraded_covariance_scale: float = _f(100.0, 1.0, 1e12, doc="factor on the covariance of a degraded frame")
+    min_textured_fraction: float = _f(0.002, 0.0, 1.0,
+                                      doc="share of (half-resolution) pixels with a gradient above "
+                                          "rgb_selection.min_gradient below which the colour image is unusable "
+                                          "(lens covered, dark, saturated): the frame is tracked on depth (and "
+                                          "events) alone and reported degraded. Real and rendered scenes: > 5 %")
 
 
 @dataclass(frozen=True)
@@ -230,6 +235,11 @@ class FusionConfig:
     min_points: int = _f(30, 1, 100000, doc="fewer event map points than this and the event term is not used")
     min_inlier_fraction: float = _f(0.3, 0.0, 1.0, doc="ATS inliers / visible below which the event term "
                                     "does not count as constraining the pose")
+    max_event_rate_ev_s: float = _f(20e6, 1e3, 1e10,
+                                    doc="events folded into the surface per second at most (bursts up to 50 ms "
+                                        "of it): beyond, the oldest events of a batch are dropped and counted, so "
+                                        "a flood (flickering light, a hot sensor) keeps the per-frame time bounded "
+                                        "(20 M ev/s ~ 5 ms of surface update per 33 ms frame)")
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,10 @@ class OdometryRuntime:
             None if config.rgb_camera.use_camera_info else config.rgb_camera.model())
         self.event_camera = event_camera if event_camera is not None else (
             None if config.event_camera.use_camera_info else config.event_camera.model())
-        self.assembler = FrameAssembler(config.rig, with_events=self.use_events)
+        # events waiting for their frame: at most what the core would fold in over the assembler's wait
+        wait_s = 0.25
+        self.assembler = FrameAssembler(config.rig, with_events=self.use_events, max_event_wait_s=wait_s,
+                                        max_buffered_events=int(config.fusion.max_event_rate_ev_s * wait_s))
         self.core: OdometryCore | None = None
         self._decoders: dict[str, Any] = {}
         self._imu_pending: list[ImuBatch] = []
@@ -265,6 +268,11 @@ class OdometryRuntime:
         self._last_stamp = stamp
         self.counters["frames"] += 1
         self.counters[f"status_{getattr(result.status, 'value', result.status)}"] += 1
+        if result.events_dropped:
+            self._problem("events_dropped", f"event flood: {result.events_dropped} events dropped before the frame "
+                          f"at {stamp} ns (over fusion.max_event_rate_ev_s = "
+                          f"{self.config.fusion.max_event_rate_ev_s:.3g})")
+            self.counters["events_dropped"] += result.events_dropped - 1  # _problem counted one
         twist = None
         if self._last_out is not None and stamp > self._last_out[0]:
             twist = body_twist(self._last_out[1], result.T_odom_base, (stamp - self._last_out[0]) * 1e-9)

@@ -41,6 +41,8 @@ class EventFrontEnd:
 
     #: Events kept beyond the selection window (a frame's selection may run a frame later).
     RETAIN_MARGIN_NS = 150_000_000
+    #: The event-rate cap admits bursts of this much time at the full rate.
+    BURST_NS = 50_000_000
 
     def __init__(self, raw_camera: CameraModel, config: AtsvoConfig, levels: int) -> None:
         self.config = config
@@ -64,6 +66,12 @@ class EventFrontEnd:
         self._lut_x = np.where(inside, pu, -1).astype(np.int32)
         self._lut_y = np.where(inside, pv, -1).astype(np.int32)
         self._raw_w, self._raw_h = w, h
+        self._rate = float(config.fusion.max_event_rate_ev_s)
+        self._capacity = self._rate * self.BURST_NS * 1e-9
+        self._tokens = self._capacity
+        self._token_ns: int | None = None
+        #: events dropped by the rate cap (oldest of their batch first), since construction
+        self.dropped_events = 0
 
     @property
     def n_levels(self) -> int:
@@ -75,14 +83,35 @@ class EventFrontEnd:
         self._recent.clear()
 
     def add_events(self, batch: EventBatch) -> None:
-        """Fold a time-ordered batch into the surface; keep the last selection window for Eq. 3."""
+        """Fold a time-ordered batch into the surface; keep the last selection window for Eq. 3.
+
+        A token bucket on the event clock caps the rate at ``fusion.max_event_rate_ev_s``: in a flood
+        only the newest events of a batch go in (the surface at the next frame is made of the latest
+        events anyway), the others are counted in :attr:`dropped_events`.
+        """
         if len(batch) == 0:
             return
+        batch = self._admit(batch)
         self.surface.update(batch)
         self._recent.append(batch)
         newest = batch.t_last_ns
         while self._recent and self._recent[0].t_last_ns < newest - self._retain_ns:
             self._recent.popleft()
+
+    def _admit(self, batch: EventBatch) -> EventBatch:
+        """The newest events of ``batch`` that the rate cap lets through."""
+        t_last = batch.t_last_ns
+        if self._token_ns is not None:
+            elapsed_s = max(0, t_last - self._token_ns) * 1e-9
+            self._tokens = min(self._capacity, self._tokens + self._rate * elapsed_s)
+        self._token_ns = t_last if self._token_ns is None else max(self._token_ns, t_last)
+        n, keep = len(batch), max(1, int(self._tokens))
+        if n <= keep:
+            self._tokens -= n
+            return batch
+        self._tokens -= keep
+        self.dropped_events += n - keep
+        return batch.select(slice(n - keep, n))
 
     def recent_pixels(self, t_ns: int) -> np.ndarray:
         """Bool image (pinhole grid) of the pixels hit in the selection window before ``t_ns``, undistorted."""

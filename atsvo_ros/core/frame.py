@@ -68,7 +68,8 @@ class OdometryResult:
     order x y z rot_x rot_y rot_z. ``tracking_time_s`` covers preprocessing and tracking (what a
     new frame waits for), not keyframe insertion. ``mode`` is ``rgbd`` or ``fused`` (the event term
     took part in this frame). ``reason`` says why the status is not ``ok`` (None when it is).
-    ``inliers`` holds the inlier count of each residual block (``rgb``, ``depth``, ``ats``).
+    ``inliers`` holds the inlier count of each residual block (``rgb``, ``depth``, ``ats``);
+    ``events_dropped`` the events the rate cap (``fusion.max_event_rate_ev_s``) left out since the last frame.
     """
 
     stamp_ns: int
@@ -83,6 +84,7 @@ class OdometryResult:
     keyframe_inserted: bool
     reason: str | None = None
     inliers: dict[str, int] = field(default_factory=dict)
+    events_dropped: int = 0
 
 
 __all__ = ["OdometryResult", "RgbdFrame", "TrackingStatus"]

@@ -94,6 +94,7 @@ class PreparedFrame:
     depth_m: np.ndarray  # float32 metres, NaN/out of range kept as given (the mapper validates)
     depth_pyramid: list[np.ndarray]  # float32 per level, 0 = invalid
     n_valid_depth: int
+    textured_fraction: float = 1.0  # share of half-resolution pixels whose gradient passes the selection floor
 
     @property
     def grey(self) -> np.ndarray:
@@ -104,11 +105,12 @@ class RgbdFrontEnd(ImageFrontEnd):
     """The colour camera's front end; the aligned depth follows the colour image."""
 
     def __init__(self, raw_camera: CameraModel, levels: int, depth_min_m: float, depth_max_m: float,
-                 depth_edge_ratio: float) -> None:
+                 depth_edge_ratio: float, min_gradient: float = 7.0) -> None:
         super().__init__(raw_camera, levels)
         self.depth_min_m = float(depth_min_m)
         self.depth_max_m = float(depth_max_m)
         self.depth_edge_ratio = float(depth_edge_ratio)
+        self.min_gradient = float(min_gradient)
 
     def prepare(self, frame: RgbdFrame) -> PreparedFrame:
         """Check, rectify and build the pyramids of one frame."""
@@ -125,7 +127,15 @@ class RgbdFrontEnd(ImageFrontEnd):
         if not frame.depth_rectified:
             depth = self.rectify(depth, nearest=True)
         dpyr = depth_pyramid(depth, self.n_levels, self.depth_edge_ratio, self.depth_min_m, self.depth_max_m)
-        return PreparedFrame(int(frame.stamp_ns), self.pyramid(grey), depth, dpyr, int(np.count_nonzero(dpyr[0])))
+        pyr = self.pyramid(grey)
+        return PreparedFrame(int(frame.stamp_ns), pyr, depth, dpyr, int(np.count_nonzero(dpyr[0])),
+                             _textured_fraction(pyr[min(1, len(pyr) - 1)], self.min_gradient))
+
+
+def _textured_fraction(level: np.ndarray, min_gradient: float) -> float:
+    """Share of pixels of one pyramid level ([I, Ix, Iy]) whose gradient norm exceeds ``min_gradient``."""
+    g2 = level[..., 1] ** 2 + level[..., 2] ** 2
+    return float(np.count_nonzero(g2 > min_gradient**2)) / max(1, g2.size)
 
 
 __all__ = ["ImageFrontEnd", "PreparedFrame", "RgbdFrontEnd", "to_grey", "usable_levels"]

@@ -68,7 +68,9 @@ class Odometry:
 
     #: A gap between frames longer than this resets the motion model (constant motion is meaningless).
     MAX_GAP_S = 1.0
-    _BUFFER_NS = 1_000_000_000
+    #: IMU kept for the gyro prediction: long enough to carry the rotation across a camera dropout of a few
+    #: seconds (~1,200 samples at 400 Hz), when the constant-motion model knows nothing any more
+    _IMU_BUFFER_NS = 3_000_000_000
 
     def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel, event_camera: CameraModel | None = None,
                  mapping: Callable[[Mapper], MappingPort] | None = None) -> None:
@@ -76,7 +78,8 @@ class Odometry:
         self.config = config
         self.raw_camera = rgb_camera
         self.frontend = RgbdFrontEnd(rgb_camera, config.tracker.pyramid_levels, config.rig.depth_min_m,
-                                     config.rig.depth_max_m, config.mapping.depth_edge_ratio)
+                                     config.rig.depth_max_m, config.mapping.depth_edge_ratio,
+                                     config.rgb_selection.min_gradient)
         self.camera = self.frontend.camera
         self.cameras = self.frontend.cameras
         self.n_levels = self.frontend.n_levels
@@ -98,6 +101,7 @@ class Odometry:
         # the previous frame's event surface, depth and pose: what a temporary event map is built from
         self._prev_event: tuple[EventFrame, np.ndarray, np.ndarray] | None = None
         self._events_since_frame = 0
+        self._dropped_reported = 0  # the event front end's drop count at the last result
         self._events_per_frame: deque[int] = deque(maxlen=2)
         self._imu: deque[ImuBatch] = deque()
         self._affine = (0.0, 0.0)
@@ -131,12 +135,12 @@ class Odometry:
         self._event_time_s += time.perf_counter() - t0
 
     def add_imu(self, batch: ImuBatch) -> None:
-        """Buffer IMU samples (time order; the last second is kept): their gyro predicts each frame's rotation."""
+        """Buffer IMU samples (time order; the last 3 s are kept): their gyro predicts each frame's rotation."""
         if len(batch) == 0:
             return
         self._imu.append(batch)
         newest = batch.t_last_ns
-        while self._imu and self._imu[0].t_last_ns < newest - self._BUFFER_NS:
+        while self._imu and self._imu[0].t_last_ns < newest - self._IMU_BUFFER_NS:
             self._imu.popleft()
 
     # ------------------------------------------------------------------ main entry
@@ -156,7 +160,9 @@ class Odometry:
         note = self._check_clock(stamp)
         self._last_stamp = stamp
         predicted = self.motion.predict(stamp)
-        ev_frame = self.events.render(stamp) if self.events is not None else None
+        # a silent event camera (dropout, cap on) leaves a stale surface that would pull towards zero motion
+        live = self.events is not None and n_events >= self.config.fusion.min_points
+        ev_frame = self.events.render(stamp) if live else None
         if not self.tracking.has_map:
             self._end_frame(n_events)
             return self._initialise(prepared, stamp, predicted, t0, note, ev_frame)
@@ -188,6 +194,12 @@ class Odometry:
                 self._end_frame(n_events)
                 return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame)
             out, fused, status = best
+        if not self.tracking.colour_usable(prepared) and status is not TrackingStatus.DEGRADED:
+            # one sensor is blind: the pose rests on depth (and events) alone, and the map is left as it is
+            status = TrackingStatus.DEGRADED
+            blind = (f"colour image without texture ({100 * prepared.textured_fraction:.2f} % textured pixels: "
+                     "lens covered, dark or saturated?): tracked on depth alone")
+            note = f"{note}; {blind}" if note else blind
         t_track = time.perf_counter() - t0
         self.last_loss_reason = out.verdict.reason or note
         kf = False
@@ -317,20 +329,38 @@ class Odometry:
             self.tracking.set_snapshot(snap)
         return True
 
+    def _unmappable(self, prepared: PreparedFrame, T_c_w: np.ndarray) -> str | None:
+        """Why a map built from this frame alone would not constrain the pose (None when it would).
+
+        A textureless wall, a covered lens with no depth, a frame of sky: mapping it would give a map
+        that no later frame can be tracked against. The test is the frame tracked against its own
+        candidate map at its own pose: the same checks (singular system, degenerate geometry) as any frame.
+        """
+        why = "this frame cannot anchor a map: "
+        if prepared.n_valid_depth == 0:
+            return why + ("no valid depth in this frame (check the depth topic's encoding and scale, "
+                          "and rig.depth_min_m / depth_max_m)")
+        candidate = Mapper(self.config, self.cameras).insert(Tracking.reset_request(prepared, T_c_w))
+        probe = Tracking(self.config, self.cameras)
+        probe.set_snapshot(candidate)
+        if not probe.has_map:
+            return why + "no map point could be selected (no texture, no depth structure)"
+        verdict = probe.track(prepared, [T_c_w], (0.0, 0.0), T_c_w).verdict
+        return None if verdict.level == OK else why + str(verdict.reason)
+
     def _initialise(self, prepared: PreparedFrame, stamp: int, T_c_w: np.ndarray, t0: float,
                     note: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
         first = self.mapping.n_keyframes == 0  # never had a map: still initialising (e.g. no depth yet)
+        why_not = self._unmappable(prepared, T_c_w)
+        ok = why_not is None and self._insert(Tracking.reset_request(prepared, T_c_w)) and self.tracking.has_map
         t_track = time.perf_counter() - t0
-        ok = self._insert(Tracking.reset_request(prepared, T_c_w)) and self.tracking.has_map
         if ok:
             self._affine = (0.0, 0.0)
             status = TrackingStatus.INITIALISING if first else TrackingStatus.REINITIALISED
             self.last_loss_reason = note
         else:
             status = TrackingStatus.INITIALISING if first else TrackingStatus.LOST
-            self.last_loss_reason = ("no valid depth in this frame (check the depth topic's encoding and scale, "
-                                     "and rig.depth_min_m / depth_max_m)" if prepared.n_valid_depth == 0
-                                     else "no map point could be selected in this frame (no texture?)")
+            self.last_loss_reason = why_not
         self.motion.push(stamp, T_c_w)
         if ev_frame is not None:
             self._prev_event = (ev_frame, prepared.depth_m, T_c_w)
@@ -338,12 +368,19 @@ class Odometry:
 
     def _reinitialise(self, prepared: PreparedFrame, stamp: int, predicted: np.ndarray, t0: float,
                       reason: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
-        """Tracking and relocalisation failed: a new map from this frame at the predicted pose (no jump, no NaN)."""
+        """Tracking and relocalisation failed: a new map from this frame at the predicted pose (no jump, no NaN).
+
+        A frame that cannot anchor a map (:meth:`_unmappable`) leaves the old map in place: the frame is
+        lost, the pose follows the motion model, and the next good frame is tracked against the old map.
+        """
+        why_not = self._unmappable(prepared, predicted)
+        ok = why_not is None and self._insert(Tracking.reset_request(prepared, predicted)) and self.tracking.has_map
         t_track = time.perf_counter() - t0
-        ok = self._insert(Tracking.reset_request(prepared, predicted)) and self.tracking.has_map
         if ok:
             self._affine = (0.0, 0.0)
-        self.motion.reset()
+            self.motion.reset()
+        else:
+            reason = f"{reason}; {why_not}" if reason else why_not
         self.motion.push(stamp, predicted)
         # the new map and this frame's event surface share the predicted pose: a consistent base for the next
         self._prev_event = (ev_frame, prepared.depth_m, predicted) if ok and ev_frame is not None else None
@@ -367,13 +404,17 @@ class Odometry:
         else:
             A = _adjoint(self.T_base_rgb)
             cov = A @ res.covariance @ A.T
-            if status is TrackingStatus.DEGRADED:
+            if status is TrackingStatus.DEGRADED and out.verdict.level != OK:  # doubted, not merely one-eyed
                 cov = cov * self.config.tracker.degraded_covariance_scale
         inliers = {k: v.n_inliers for k, v in res.blocks.items()} if res is not None else {}
         n_points = len(self.tracking.snapshot)
+        dropped = 0
+        if self.events is not None:
+            dropped = self.events.dropped_events - self._dropped_reported
+            self._dropped_reported = self.events.dropped_events
         return OdometryResult(stamp, T_odom_base, T_odom_cam, cov, status, "fused" if fused else "rgbd",
                               float(t_track), int(n_points),
-                              int(inliers.get("rgb", 0)), bool(kf), self.last_loss_reason, inliers)
+                              int(inliers.get("rgb", 0)), bool(kf), self.last_loss_reason, inliers, int(dropped))
 
 
 __all__ = ["Odometry", "OdometryResult", "RgbdFrame", "TrackingStatus"]

@@ -93,6 +93,10 @@ class Tracking:
             self._outlier_runs = np.zeros(len(snapshot), np.int32)
         self.snapshot = snapshot
 
+    def colour_usable(self, frame: PreparedFrame) -> bool:
+        """Whether the colour image has texture to align (not a covered lens, darkness or saturation)."""
+        return frame.textured_fraction >= self.config.tracker.min_textured_fraction
+
     @property
     def has_map(self) -> bool:
         return len(self.snapshot) > 0 or len(self.snapshot.geo_points_w) > 0
@@ -107,7 +111,7 @@ class Tracking:
         cfg = self.config.tracker
         snap = self.snapshot
         out: list[ResidualBlock] = []
-        if len(snap):
+        if len(snap) and self.colour_usable(frame):
             # With zero-mean patches the gain is the frame's exposure relative to the map, measured from
             # patch means after the alignment, not fitted: blur lowers contrast, and a fitted gain
             # shrinks with it until the cost hardly depends on the pose.

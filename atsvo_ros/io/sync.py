@@ -32,6 +32,7 @@ class SyncStats:
     released_without_events: int = 0
     late_events: int = 0
     clock_jumps: int = 0
+    dropped_events: int = 0
 
 
 class FrameAssembler:
@@ -42,12 +43,16 @@ class FrameAssembler:
     CLOCK_JUMP_NS = 1_000_000_000
 
     def __init__(self, rig: RigConfig, with_events: bool = True, max_event_wait_s: float = 0.25,
-                 max_pending: int = 30) -> None:
+                 max_pending: int = 30, max_buffered_events: int = 5_000_000) -> None:
         self.rig = rig
         self.with_events = with_events
         self.tol_ns = int(round(rig.sync_tolerance_s * 1e9))
         self.max_wait_ns = int(round(max_event_wait_s * 1e9))
         self.max_pending = max_pending
+        #: events waiting for a frame beyond this are dropped, oldest first (no frames for a while, a flood):
+        #: the core keeps only the newest anyway, and the buffer must not grow with the outage
+        self.max_buffered_events = int(max_buffered_events)
+        self._n_events = 0
         self.stats = SyncStats()
         self._rgb: deque[tuple[int, np.ndarray]] = deque()
         self._depth: deque[tuple[int, np.ndarray]] = deque()
@@ -92,6 +97,8 @@ class FrameAssembler:
                 batch = batch.select(~late)
             if len(batch):
                 self._events.append(batch)
+                self._n_events += len(batch)
+                self._bound_events()
         mark = max(batch.t_last_ns if len(batch) else -(2**63), complete_to_ns if complete_to_ns is not None
                    else -(2**63))
         if mark > -(2**63):
@@ -144,6 +151,7 @@ class FrameAssembler:
         self._depth.clear()
         self._pairs.clear()
         self._events = []
+        self._n_events = 0
         self._event_mark_ns = None
         self._last_cut_ns = None
         self._newest_ns = -(2**63)
@@ -191,6 +199,21 @@ class FrameAssembler:
             self._depth.popleft()
             self.stats.dropped_depth += 1
 
+    def _bound_events(self) -> None:
+        """Drop the oldest buffered events beyond ``max_buffered_events``."""
+        excess = self._n_events - self.max_buffered_events
+        while excess > 0 and self._events:
+            head = self._events[0]
+            if len(head) <= excess:
+                self._events.pop(0)
+                cut = len(head)
+            else:
+                self._events[0] = head.select(slice(excess, None))
+                cut = excess
+            self._n_events -= cut
+            self.stats.dropped_events += cut
+            excess -= cut
+
     def _release(self) -> tuple[Any, EventBatch]:
         t, rgb, depth = self._pairs.popleft()
         events = EventBatch.empty()
@@ -200,6 +223,7 @@ class FrameAssembler:
             events = allev.select(slice(0, k))
             rest = allev.select(slice(k, None))
             self._events = [rest] if len(rest) else []
+            self._n_events = len(rest)
         self._last_cut_ns = t
         self.stats.frames += 1
         return RgbdFrame(stamp_ns=t, rgb=rgb, depth_m=depth), events

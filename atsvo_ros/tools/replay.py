@@ -230,7 +230,8 @@ def _counter_notes(runtime: Any) -> list[str]:
     labels = {"images_rejected": "undecodable images skipped", "frames_duplicate": "duplicated frames skipped",
               "frames_out_of_order": "out-of-order frames skipped", "frames_failed": "frames the core rejected",
               "clock_jumps": "clock jumps (motion model reset)", "imu_rejected": "unusable IMU messages skipped",
-              "frames_waiting_camera_info": "frames before the first camera_info"}
+              "frames_waiting_camera_info": "frames before the first camera_info",
+              "events_dropped": "events dropped by the event-rate cap (flood)"}
     counters = runtime.counters
     return [f"{counters[k]} {v} (first: {runtime.first_problem.get(k, '?')})" for k, v in labels.items()
             if counters.get(k)]

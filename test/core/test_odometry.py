@@ -92,7 +92,7 @@ def test_depth_already_on_the_rectified_grid(room, config):
     assert r.status is TrackingStatus.OK and dt < 2e-3 and dr < 0.1, (dt, dr)
 
 
-def test_loss_reinitialises_without_jump_or_nan(room, config):
+def test_a_blank_frame_is_lost_and_the_map_kept_for_the_next(room, config):
     odo = Odometry(config, CAM)
     step = se3_exp(np.array([0.0, 0.0, 0.01, 0.0, 0.0, 0.0]))
     poses = [np.linalg.matrix_power(step, k) for k in range(3)]
@@ -105,17 +105,22 @@ def test_loss_reinitialises_without_jump_or_nan(room, config):
     # Published pose keeps moving with the motion model, never back to the origin.
     assert np.linalg.norm(lost.T_odom_base[:3, 3] - res[-1].T_odom_base[:3, 3]) < 0.02
     assert np.linalg.norm(lost.T_odom_base[:3, 3]) > 0.015
+    assert "cannot anchor a map" in lost.reason and "no valid depth" in lost.reason
+    # The blank frame could not anchor a new map, so the old one is still there: the next frame is
+    # tracked against it, at the right pose (no re-initialisation, no offset).
     back = odo.process_frame(_frame(room, CAM, np.linalg.matrix_power(step, 4), 4 * 33 * MS, ss=1))
-    assert back.status is TrackingStatus.REINITIALISED and back.keyframe_inserted
-    nxt = odo.process_frame(_frame(room, CAM, np.linalg.matrix_power(step, 5), 5 * 33 * MS, ss=1))
-    assert nxt.status is TrackingStatus.OK
-    assert np.all(np.isfinite(nxt.T_odom_base)) and np.all(np.isfinite(nxt.covariance))
+    assert back.status is TrackingStatus.OK and np.all(np.isfinite(back.covariance))
+    T_b_c = config.rig.T_base_rgb_matrix()
+    dt, dr = _err(back.T_odom_base, T_b_c @ np.linalg.matrix_power(step, 4) @ se3_inv(T_b_c))
+    assert dt < 8e-3 and dr < 0.15, (dt, dr)  # measured 3.1 mm, 0.04 deg (aliased ss=1 renders)
 
 
 def _second_frame_loss(room, overrides, second):
     """Track a keyframe at the origin, then ``second(T_w_c1)``'s frame; return (result, odometry)."""
-    odo = Odometry(load_config("synthetic", overrides=overrides), CAM)
+    odo = Odometry(load_config("synthetic"), CAM)
     odo.process_frame(_frame(room, CAM, np.eye(4), 0, ss=1))
+    # the rule under test judges tracking only: a frame still anchors a new map under the defaults
+    odo.tracking.config = load_config("synthetic", overrides=overrides)
     T_w_c1 = se3_exp(np.array([0.01, 0.0, 0.01, 0.0, 0.005, 0.0]))
     return odo.process_frame(second(T_w_c1)), odo
 

@@ -121,3 +121,16 @@ def test_a_clock_jumping_back_starts_the_assembler_over():
     assert [f.stamp_ns for f, _ in again] == [200 * MS, 233 * MS, 266 * MS]
     assert all(len(ev) == 10 for _, ev in again[1:])  # the new timeline's events are not dropped as late
     assert asm.stats.clock_jumps == 1 and asm.stats.late_events == 0
+
+
+def test_events_waiting_for_frames_are_bounded_oldest_first():
+    """No colour for a while (or a flood): the event buffer keeps the newest events only, and counts the rest."""
+    asm = FrameAssembler(RigConfig(), with_events=True, max_buffered_events=25)
+    for k in range(10):
+        asm.add_events(_events(10 * k, 10 * k + 10))  # 10 events per 10 ms, no frame
+    assert asm.stats.dropped_events == 75
+    asm.add_rgb(100 * MS, _img(1))
+    asm.add_depth(100 * MS, _dep(1.0))
+    asm.add_events(EventBatch.empty(), complete_to_ns=100 * MS)
+    [(frame, ev)] = asm.pop_ready()
+    assert len(ev) == 25 and ev.t[0] == 75 * MS and ev.t[-1] == 99 * MS  # the newest 25
