@@ -15,6 +15,8 @@ SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
                "event decoding and time-surface speed vs rosbags and dv-processing"),
     "tracking": ("atsvo_ros.tools.bench_tracking", "add_tracking_args", "main_tracking",
                  "RGB-D tracking time per frame and accuracy on synthetic trot/flying sequences"),
+    "longrun": ("atsvo_ros.tools.bench_longrun", "add_longrun_args", "main_longrun",
+                "memory (RSS per minute) and latency over a long synthetic run: is anything growing?"),
     "real": ("atsvo_ros.tools.bench_real", "add_real_args", "main_real",
              "our RGB-D odometry vs Open3D's on real TUM RGB-D sequences (ATE, RPE, time, wrong-but-ok frames)"),
 }

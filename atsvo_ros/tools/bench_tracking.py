@@ -86,6 +86,34 @@ def simulated_events(spec: Any, progress: bool = True) -> Any:
     return ev
 
 
+def flicker_events(events: Any, factor: float, flicker_hz: float = 100.0, seed: int = 0) -> Any:
+    """``events`` plus a flickering lamp that multiplies the mean event rate by ``factor``.
+
+    The lamp covers a quarter of the sensor (a centred rectangle); at each flicker period every lamp
+    pixel fires the same number of ON events in the rising half and OFF events in the falling half,
+    at random times (mains-powered lights flicker at 100 Hz: what floods a real event camera indoors).
+    """
+    from atsvo_ros.core.events import EventBatch
+
+    if factor <= 1.0 or len(events) == 0:
+        return events
+    rng = np.random.default_rng(seed)
+    w, h = events.width, events.height
+    xs, ys = np.meshgrid(np.arange(w // 4, 3 * w // 4), np.arange(h // 4, 3 * h // 4))
+    xs, ys = xs.ravel(), ys.ravel()
+    t0, t1 = events.t_first_ns, events.t_last_ns
+    period_ns = int(1e9 / flicker_hz)
+    n_periods = max(1, (t1 - t0) // period_ns)
+    extra = int((factor - 1.0) * len(events))
+    per_period = max(1, extra // n_periods)
+    start = t0 + period_ns * np.repeat(np.arange(n_periods, dtype=np.int64), per_period)
+    phase = rng.integers(0, period_ns, len(start))
+    pix = rng.integers(0, len(xs), len(start))
+    lamp = EventBatch(xs[pix], ys[pix], start + phase, (phase < period_ns // 2).astype(np.uint8), w, h)
+    both = EventBatch.concatenate([events, lamp])
+    return both.select(np.argsort(both.t, kind="stable"))
+
+
 def _interleaved(frames: list, imu: Any, events: Any = None) -> Iterator[tuple[str, Any]]:
     """Frames, IMU samples and events in time order, as a live robot delivers them (all data up to each frame first)."""
     k = 0
@@ -108,7 +136,7 @@ def _interleaved(frames: list, imu: Any, events: Any = None) -> Iterator[tuple[s
 def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None = None,
                  overrides: dict[str, Any] | None = None, width: int | None = None, height: int | None = None,
                  progress: bool = True, use_imu: bool = False, loss_limit_cm: float = 10.0,
-                 use_events: bool = False) -> dict[str, Any]:
+                 use_events: bool = False, flood_factor: float = 1.0) -> dict[str, Any]:
     """Simulate (or load) one sequence, track it through the runtime, score it; a flat dict of figures."""
     from atsvo_ros.config import load_config
     from atsvo_ros.eval.metrics import EvalOptions, evaluate
@@ -120,6 +148,8 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
                         height=height)
     frames, imu, sim = simulated_frames(spec, progress)
     events = simulated_events(spec, progress) if use_events else None
+    if events is not None and flood_factor > 1.0:
+        events = flicker_events(events, flood_factor, seed=seed)
     cfg = load_config(spec.config or "synthetic", overrides=overrides)
     rt = OdometryRuntime(cfg, sim.rig.rgb_camera, sim.rig.event_camera,
                          use_events=use_events and cfg.mode == "fused")
@@ -150,6 +180,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     m = ev.metrics
     times = np.array([r.tracking_time_s for r in results if r.status.value == "ok" and not r.keyframe_inserted]) * 1e3
     fused_t = np.array([r.tracking_time_s for r in results if r.mode == "fused"]) * 1e3
+    all_t = np.array([r.tracking_time_s for r in results]) * 1e3
     err_m = ev.position_errors_m
     bad = np.flatnonzero(err_m > loss_limit_cm * 0.01)
     first_bad = None if not len(bad) else int(np.searchsorted(stamps_ns, ev.stamps_ns[bad[0]]))
@@ -166,6 +197,9 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
         "modes": dict(Counter(r.mode for r in results)), "events": 0 if events is None else len(events),
         "fused_ms_median": float(np.median(fused_t)) if len(fused_t) else None,
         "max_error_cm": float(err_m.max() * 100.0), "status_left_ok_in_time": bool(flagged),
+        "latency_ms_p50": float(np.median(all_t)), "latency_ms_p99": float(np.percentile(all_t, 99)),
+        "events_dropped": int(rt.counters.get("events_dropped", 0)) + int(rt.assembler.stats.dropped_events),
+        "flood_factor": flood_factor,
     }
 
 
@@ -184,6 +218,9 @@ def add_tracking_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--height", type=int, default=None)
     p.add_argument("--imu", action="store_true", help="feed the simulated IMU (gyro prior)")
     p.add_argument("--events", action="store_true", help="simulate the event camera and fuse it (mode fused)")
+    p.add_argument("--flood", type=float, default=1.0, metavar="FACTOR",
+                   help="with --events: add a 100 Hz flickering lamp multiplying the event rate by FACTOR "
+                        "(load test: per-frame latency p50/p99 and the events the rate cap dropped)")
     p.add_argument("--loss-limit-cm", type=float, default=10.0,
                    help="position error by which the status must have left ok (default 10)")
     p.add_argument("--json", default=None, help="write the per-sequence figures to this file")
@@ -203,13 +240,15 @@ def main_tracking(args: argparse.Namespace) -> int:
         for seed in args.seeds:
             r = run_sequence(scenario, seed, args.duration, args.config, overrides, args.width, args.height,
                              progress=not args.quiet, use_imu=args.imu, loss_limit_cm=args.loss_limit_cm,
-                             use_events=args.events)
+                             use_events=args.events, flood_factor=args.flood)
             rows.append(r)
             print(f"{scenario:8s} seed {seed}: ATE {r['ate_rmse_cm']:.2f} cm (max {r['max_error_cm']:.1f})  "
                   f"RPE {r['rpe_deg_per_frame']:.3f} deg/f {r['rpe_cm_per_frame']:.3f} cm/f  "
                   f"track median {_fmt(r['track_ms_median'], '.2f')} ms (p90 {_fmt(r['track_ms_p90'], '.2f')})  "
                   f"diverged {r['diverged']}  flagged-in-time {r['status_left_ok_in_time']}  {r['statuses']}  "
-                  f"{r['modes']}  fused median {_fmt(r['fused_ms_median'], '.2f')} ms  kf {r['keyframes']}", flush=True)
+                  f"{r['modes']}  fused median {_fmt(r['fused_ms_median'], '.2f')} ms  kf {r['keyframes']}  "
+                  f"latency p50/p99 {r['latency_ms_p50']:.1f}/{r['latency_ms_p99']:.1f} ms  "
+                  f"events {r['events']} (dropped {r['events_dropped']})", flush=True)
     med = [r["track_ms_median"] for r in rows if r["track_ms_median"] is not None]
     print(f"summary: worst ATE {max(r['ate_rmse_cm'] for r in rows):.2f} cm, worst RPE "
           f"{max(r['rpe_deg_per_frame'] for r in rows):.3f} deg/f, median tracking "
