@@ -41,12 +41,15 @@ were a rate. Two readings keep the described behaviour:
   (a glow ahead of every edge in a textured scene), so they are left out; gaps are clipped at ``tau_u`` so
   one stale neighbour cannot dominate.
 
-Measured (``atsvo-bench ats-basin``, table in the README): the convergence basin of the ATS term alone is
-set mostly by the pattern, the blur and the pyramid, not by the decay -- 3-6 px on one level for every rule,
-~4 deg with the tracker's pyramid on simulated backflip/bound sequences. ``fire_age`` removes the notch
-(one level, slow motion: 5 px vs 3 px for ``mean_age`` against the motion) and is on par with the constant
-and the printed surfaces elsewhere; ``mean_age``'s rings stay slightly more accurate in event floods, where
-every decay whites out towards ``tau_l``.
+Measured (``atsvo-bench ats-basin``, table in the README): the basin of the ATS term alone is set mostly by the
+pattern, the blur and the pyramid, not by the decay: 3-6 px on one level for every rule, 16-22 px and ~4 deg
+(simulated backflip/bound) with the tracker's 4 levels. On one level ``fire_age`` removes the notch's cost
+at low and medium speed (sparse scene, 300/1000 px/s: 5/6 px vs 3/4 px for ``mean_age``), but at 3000
+px/s, where ``tau_l`` bounds both, ``mean_age``'s long ghost band reaches further against the motion (8 vs
+2 px; the pyramid evens it out: 22 vs 16 px). On the simulated dense sequences ``mean_age`` converges from
+the truth slightly more often and more precisely (bound, 4 levels: 79 % / 0.28 px vs 71 % / 0.45 px):
+its rings keep contrast in event floods, where every other decay whites out towards ``tau_l``. The
+constant and printed surfaces, with the longest trails, have the largest basins where they do not white out.
 
 Cost. ``fire_age`` needs the last timestamps only: the update is a scatter into the padded surface (~700 M
 events/s on one core, dv-processing's ``TimeSurface.accept`` ~400 M/s). Its render reads the 16 neighbours
@@ -54,9 +57,9 @@ of every pixel within the decay cutoff: ages once as float32 (NaN where never fi
 them), then, per row, runs of 16-pixel blocks with an active pixel through a loop written out over the 16
 ring offsets so that it vectorises across pixels (one float32 lane per pixel), Eq. 1 in float32 with its own
 exp (no libm call). Against the int64 reference (``tau_map`` and the generic-ring path) the values agree to a
-relative ~1e-5. On one core, 320x240 DVXplorer recording: ~0.13 ms raw, ~0.21 ms with the blurs (~0.08 ms of
-OpenCV box + median blur); 346x260 DAVIS346: ~0.22 / ~0.31 ms (dv-processing's ``generateFrame``, a linear
-map without neighbours: ~0.18 / ~0.22 ms). The ring pass is bound by the vector units (~6 operations per
+relative ~1e-5. On one core, 320x240 DVXplorer recording: ~0.14 ms raw, ~0.22 ms with the blurs (~0.08 ms of
+OpenCV box + median blur); 346x260 DAVIS346: ~0.24 / ~0.33 ms (dv-processing's ``generateFrame``, a linear
+map without neighbours: ~0.18 / ~0.21 ms). The ring pass is bound by the vector units (~6 operations per
 neighbour per pixel), and noise events leave few blocks without an active pixel.
 
 ``mean_age`` / ``eq2_printed`` (kept as ablations) keep, per pixel, *which* ring neighbours are its n latest

@@ -38,5 +38,5 @@ def test_synthetic_pair_converges_from_a_small_offset(rule):
     rows = bench_synthetic([rule], [1], ["sparse"], [1000.0], 1, [1.0, 2.0], TrackerConfig(), progress=False)
     (row,) = rows
     assert row["pairs"] == 1
-    for d in ("lag", "lead", "across"):
+    for d in ("all", "lag", "lead"):
         assert np.all(np.array(row[f"success_{d}"]) == 1.0), row
