@@ -99,15 +99,24 @@ class AtsConfig:
 
     tau_u_s: float = _f(0.03, 0.0, 10.0, lo_open=True, doc="upper bound of the decay time constant")
     tau_l_s: float = _f(0.003, 0.0, 10.0, lo_open=True, doc="lower bound of the decay time constant")
-    n_latest: int = _f(4, 1, 16, doc="number of latest neighbours of the 16-pixel ring used in Eq. 2")
+    n_latest: int = _f(4, 1, 16, doc="number of latest neighbours of the 16-pixel ring used in Eq. 2 (tau_mode "
+                                     "mean_age / eq2_printed; fire_age uses every neighbour that fired before "
+                                     "the pixel)")
     pattern_radius_px: int = _f(3, 1, 8, doc="radius of the 16-pixel neighbour ring (3 = FAST circle)")
     blur_ksize: int = _f(3, 1, 31, doc="box blur kernel after Eq. 2 (1 = off)")
     median_ksize: int = _f(3, 1, 31, doc="median blur kernel after Eq. 2 (1 = off, odd)")
     constant_tau_s: float = _f(0.03, 0.0, 10.0, lo_open=True, doc="tau of the constant-tau baseline")
-    tau_mode: str = _f("mean_age", choices=("mean_age", "eq2_printed"),
-                       doc="mean_age: tau = clip(mean age of the n latest neighbours, tau_l, tau_u), decays faster "
-                           "under dense/fast events as the paper describes; eq2_printed: tau = max(tau_u - mean "
-                           "age, tau_l), Eq. 2 as printed (decays slower under dense/fast events)")
+    tau_mode: str = _f("fire_age", choices=("fire_age", "mean_age", "eq2_printed"),
+                       doc="fire_age: tau = clip(fire_age_gain x mean age of the ring neighbours at the moment the "
+                           "pixel fired, tau_l, tau_u): decays faster under dense/fast events as the paper describes, "
+                           "monotonically behind a moving edge; mean_age: tau = clip(mean age of the n latest "
+                           "neighbours at the query time, tau_l, tau_u) (leaves a dark notch and a flat ghost band "
+                           "behind an edge); eq2_printed: tau = max(tau_u - mean age, tau_l), Eq. 2 as printed "
+                           "(decays slower under dense/fast events)")
+    fire_age_gain: float = _f(4.0, 0.0, 1000.0, lo_open=True,
+                              doc="tau_mode fire_age: tau per second of neighbour age; behind an edge the neighbours "
+                                  "fired ~1.7 px of motion before the pixel, so the trail fades to 1/e over ~1.7 x "
+                                  "this many pixels (while tau stays within its bounds)")
     sits_radius_px: int = _f(3, 1, 10, doc="patch radius of the speed-invariant time surface baseline")
 
 
@@ -126,9 +135,10 @@ class EventSelectionConfig:
     """Event pixel selection on the ATS (Section II-B, Eq. 3)."""
 
     alpha: float = _f(1.0, 0.0, 100.0, doc="gradient scale in I + alpha * grad > h")
-    h: float = _f(60.0, 0.0, 2000.0, doc="threshold h of Eq. 3 on the 0-255 ATS (after blur and median blur a "
-                                         "trailing ATS pixel sits near 255/e = 94 with tau_mode mean_age, sparse "
-                                         "slow scenes lower; 60 keeps ~50-300 pixels at 0.1 Mev/s on real data)")
+    h: float = _f(60.0, 0.0, 2000.0, doc="threshold h of Eq. 3 on the 0-255 ATS (after blur and median blur an "
+                                         "edge's newest pixels sit at ~150-255 and its trail decays from there; 60 "
+                                         "keeps ~170-400 pixels at 0.1-0.3 Mev/s on the real DVXplorer sample with "
+                                         "tau_mode fire_age, ~120-300 with mean_age)")
     min_distance_px: int = _f(3, 0, 100, doc="d of Eq. 3: minimum spacing in x and y")
     mask_median_ksize: int = _f(5, 1, 31, doc="median blur kernel of the ATS mask (odd)")
     window_fraction: float = _f(0.25, 0.0, 1.0, lo_open=True, doc="share of the ATS window whose events are candidates")

@@ -1,52 +1,75 @@
 """Time surfaces: the adaptive time surface (ATS, Eq. 1-2) and two baselines behind one interface.
 
-All three keep per-pixel state updated in O(events) (:meth:`TimeSurface.update`) and render a
-float32 image in 0..255 in O(pixels) (:meth:`TimeSurface.render`), followed by the paper's box blur
-and median blur (kernel sizes from :class:`~atsvo_ros.config.AtsConfig`, applied to every variant
-so that comparisons differ only in the decay).
+All keep per-pixel state updated in O(events) (:meth:`TimeSurface.update`) and render a float32 image in
+0..255 in O(pixels) (:meth:`TimeSurface.render`), followed by the paper's box blur and median blur (kernel
+sizes from :class:`~atsvo_ros.config.AtsConfig`, applied to every variant so that comparisons differ only
+in the decay).
 
-* :class:`AdaptiveTimeSurface` -- Eq. 1, ``T(x, t) = 255 exp(-(t - t_last(x)) / tau(x))`` with a
-  per-pixel ``tau`` from the ``n_latest`` most recent *active* pixels of a 16-pixel ring (radius
-  ``pattern_radius_px``; 3 = the FAST circle, our reading of Fig. 3) around ``x``, evaluated at
-  the query time.
+* :class:`AdaptiveTimeSurface` -- Eq. 1, ``T(x, t) = 255 exp(-(t - t_last(x)) / tau(x))`` with a per-pixel
+  ``tau`` from the timestamps of a 16-pixel ring (radius ``pattern_radius_px``; 3 = the FAST circle, our
+  reading of Fig. 3) around ``x``; how Eq. 2 turns them into ``tau`` is ``tau_mode`` (below).
 * :class:`ConstantTimeSurface` -- Eq. 1 with ``tau = constant_tau_s`` everywhere.
 * :class:`SpeedInvariantTimeSurface` -- Manderscheid et al. 2019 (patch radius ``sits_radius_px``).
 
-**Eq. 2 as printed vs the behaviour the paper describes.** With ``a(x)`` the mean age
-``(1/n) sum_i (t - t_last,i)`` of the n latest neighbours, the printed formula is
-``tau = max(tau_u - a, tau_l)``. Because ``tau`` divides the age in Eq. 1, that gives the *largest*
-``tau`` (slowest decay) when neighbours fired very recently -- dense texture or fast motion -- and
-the smallest when the neighbourhood is stale, the opposite of the text ("decays faster in
-high-texture environments or during high-speed motion ... slower in low-texture environments or
-during low-speed motion"). The printed form reads as if tau were a *rate* (``exp(-tau * age)``).
-We keep the neighbourhood statistic exactly as printed and map it to a time constant that behaves
-as described: ``tau = clip(a, tau_l, tau_u)`` (``tau_mode = "mean_age"``, the default): a pixel
-whose neighbours fired ``a`` seconds ago on average fades on that same time scale, so a fast edge
-(short inter-event gaps along its path) leaves a short trail and a slow one a long trail. The
-literal formula stays available as ``tau_mode = "eq2_printed"`` for comparison. With fewer than n
-active neighbours the mean runs over those; a pixel with no active neighbour uses ``tau_u``
-(nothing suggests fast motion there).
+**Eq. 2.** With ``a`` the mean age ``(1/n) sum_i (t - t_last,i)`` of the n latest active ring neighbours,
+the printed formula is ``tau = max(tau_u - a, tau_l)`` (``tau_mode = "eq2_printed"``). Because ``tau``
+divides the age in Eq. 1, that gives the *slowest* decay where neighbours fired most recently -- dense
+texture, fast motion -- the opposite of the text ("decays faster in high-texture environments or during
+high-speed motion ... slower in low-texture environments or during low-speed motion"); it reads as if tau
+were a rate. Two readings keep the described behaviour:
 
-Cost: events come in time order, so the neighbour that fires is always the newest value of every ring it
-belongs to. :meth:`AdaptiveTimeSurface.update` therefore keeps, per pixel, only *which* ring neighbours are
-its n latest active ones, in recency order: n ring indices packed as 4-bit nibbles in one int64, starting
-as placeholders (neighbours that have not fired, told apart by ``t_last``). The firing neighbour moves to the
-front and, if it was not listed, the last entry (the least recent member, or a placeholder) drops out -- a
-few branch-free bit operations, one load and one store per ring neighbour whatever n (it used to store the n
-timestamps themselves and scan them, O(n)). Rendering reads the members' times from ``t_last``, O(n) per
-pixel as before. For time-ordered events the result is exactly that of keeping the n latest timestamps (ties
-and the clamping of ages at the query time included). State lives on the surface padded by the ring radius,
-so ring neighbours need no bounds checks. Measured on one (shared) core: 25-30 M events/s for any n (was
-~10 M/s at n = 4, ~2 M/s at n = 16). Render: per row, one scalar pass lists the pixels within the decay
-cutoff with their ring age sums (the scattered loads: about two thirds of the time when every pixel is
-active), then Eq. 1 runs over the list branch-free and vectorised (exp from a polynomial, the power of two
-built in the exponent bits: no libm call). Including the blurs, best median on one shared core: ~0.22 ms at
-320x240 on a real DVXplorer recording, ~0.47 ms at 346x260 on a real DAVIS346 one, ~0.57 / ~0.68 ms at
-320x240 / 346x260 when every pixel fired within the decay window (was ~0.27, ~0.73, ~1.08, ~1.27 ms). The
-ring pass is sensitive to where the allocator put the arrays relative to each other: in some processes
-(e.g. ``atsvo-bench events``, after its decoding part) the DAVIS346 render takes ~0.7 ms. Rows split over
-two threads (numba prange) take half the time on an idle machine, but when the other core is busy the
-render waits for a descheduled thread (p90 ~8 ms), so it stays single-threaded.
+* ``mean_age`` (the default until the fusion work): ``tau = clip(a, tau_l, tau_u)`` with ``a`` taken at
+  the query time. Behind an edge moving at ``v`` px/s, a pixel ``d`` px back has the age ``d / v``, but its
+  n latest neighbours are the ring pixels nearest the edge: for ``d`` up to the ring radius they are at the
+  edge (age ~0), tau collapses to ``tau_l`` and the pixel goes dark (a notch 2-4 px behind the edge);
+  further back their mean age is about the pixel's own, so ``exp(-age / tau)`` sits near ``255 / e = 94``
+  (a flat ghost band) until tau reaches ``tau_u``. The gradient changes sign within the ATS term's basin;
+  on real data the surface draws every edge as a thin ring with a dark centre.
+* ``fire_age`` (the default): Eq. 2's statistic -- the mean age of the ring neighbours -- evaluated at the
+  moment the pixel fired instead of at the query time:
+  ``tau = clip(fire_age_gain * mean_q min(t_last(x) - t_last(q), tau_u), tau_l, tau_u)`` over the active
+  ring neighbours ``q`` that fired at or before ``x`` and have not fired since (``tau_u`` if there is none).
+  Every pixel of an edge's trail fired in the same situation -- the neighbours behind it had fired
+  ``|dx| / v`` before, ~1.7 px of motion on average on the FAST ring -- so tau is the same along the trail
+  and the decay is monotonic and smooth behind the edge (tested on simulated DVS events, an isolated edge
+  and a dense texture, 150-3000 px/s). It keeps the paper's intent: the statistic is proportional to
+  1 / speed (faster decay under fast motion) and shrinks where neighbours fired shortly before the pixel
+  (dense texture, event floods); slow or sparse neighbourhoods give ``tau_u``. The trail fades to 1/e over
+  ~1.7 x ``fire_age_gain`` pixels (4: ~7 px) while tau stays within its bounds (above 2700 px/s ``tau_l``
+  lengthens it, below ~230 px/s ``tau_u`` shortens it). Neighbours that fired *after* the pixel belong to
+  later edges; counting them would let a newer edge lengthen the decay of the older pixels in front of it
+  (a glow ahead of every edge in a textured scene), so they are left out; gaps are clipped at ``tau_u`` so
+  one stale neighbour cannot dominate.
+
+Measured (``atsvo-bench ats-basin``, table in the README): the basin of the ATS term alone is set mostly by the
+pattern, the blur and the pyramid, not by the decay: 3-6 px on one level for every rule, 16-22 px and ~4 deg
+(simulated backflip/bound) with the tracker's 4 levels. On one level ``fire_age`` removes the notch's cost
+at low and medium speed (sparse scene, 300/1000 px/s: 5/6 px vs 3/4 px for ``mean_age``), but at 3000
+px/s, where ``tau_l`` bounds both, ``mean_age``'s long ghost band reaches further against the motion (8 vs
+2 px; the pyramid evens it out: 22 vs 16 px). On the simulated dense sequences ``mean_age`` converges from
+the truth slightly more often and more precisely (bound, 4 levels: 79 % / 0.28 px vs 71 % / 0.45 px):
+its rings keep contrast in event floods, where every other decay whites out towards ``tau_l``. The
+constant and printed surfaces, with the longest trails, have the largest basins where they do not white out.
+
+Cost. ``fire_age`` needs the last timestamps only: the update is a scatter into the padded surface (~700 M
+events/s on one core, dv-processing's ``TimeSurface.accept`` ~400 M/s). Its render reads the 16 neighbours
+of every pixel within the decay cutoff: ages once as float32 (NaN where never fired, so no comparison counts
+them), then, per row, runs of 16-pixel blocks with an active pixel through a loop written out over the 16
+ring offsets so that it vectorises across pixels (one float32 lane per pixel), Eq. 1 in float32 with its own
+exp (no libm call). Against the int64 reference (``tau_map`` and the generic-ring path) the values agree to a
+relative ~1e-5. On one core, 320x240 DVXplorer recording: ~0.14 ms raw, ~0.22 ms with the blurs (~0.08 ms of
+OpenCV box + median blur); 346x260 DAVIS346: ~0.24 / ~0.33 ms (dv-processing's ``generateFrame``, a linear
+map without neighbours: ~0.18 / ~0.21 ms). The ring pass is bound by the vector units (~6 operations per
+neighbour per pixel), and noise events leave few blocks without an active pixel.
+
+``mean_age`` / ``eq2_printed`` (kept as ablations) keep, per pixel, *which* ring neighbours are its n latest
+active ones: events come in time order, so the neighbour that fires is always the newest value of every
+ring it belongs to; n ring indices packed as 4-bit nibbles in one int64 move the firing one to the front
+with a few branch-free bit operations (one load and one store per ring neighbour, ~25 M events/s for any n);
+the render reads the members' times from ``t_last``. State lives on the surface padded by the ring radius,
+so ring neighbours need no bounds checks. Rows split over two threads (numba prange) would take half the
+time on an idle machine, but when the other core is busy the render waits for a descheduled thread (p90
+~8 ms), so everything stays single-threaded.
 """
 from __future__ import annotations
 
@@ -61,7 +84,7 @@ from atsvo_ros.core.events import EventBatch
 from atsvo_ros.errors import ConfigError
 
 NEVER = kern.NEVER
-_TAU_MODES = {"mean_age": 0, "eq2_printed": 1}
+_TAU_MODES = {"mean_age": 0, "eq2_printed": 1, "fire_age": 2}
 
 
 def ring_pattern(radius_px: int = 3, n_points: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -159,14 +182,18 @@ class AdaptiveTimeSurface(TimeSurface):
         self._pad = int(max(np.abs(self.ring_dx).max(), np.abs(self.ring_dy).max()))
         self._wp = int(width) + 2 * self._pad
         self._ring_off = (self.ring_dy * self._wp + self.ring_dx).astype(np.int64)
-        super().__init__(width, height, c)
         if c.tau_mode not in _TAU_MODES:
             raise ConfigError(f"ats.tau_mode = {c.tau_mode!r}; allowed: {sorted(_TAU_MODES)}")
         self._mode = _TAU_MODES[c.tau_mode]
+        self._gain = float(c.fire_age_gain) if self._mode == 2 else 1.0  # mean_age: tau = the mean age itself
+        super().__init__(width, height, c)
         # beyond this age even tau_u leaves less than half a grey level
         self._cutoff_s = c.tau_u_s * math.log(2 * 255.0)
         self._out = np.empty((self.height, self.width), np.float32)
         self._tau = np.empty((1, 1), np.float32)
+        # fire_age with the 16-point ring renders through float32 ages (kern._fire_age_render)
+        self._fast = self._mode == 2 and len(self.ring_dx) == 16
+        self._age = np.empty(self._t_flat.shape, np.float32) if self._fast else np.empty(0, np.float32)
 
     def reset(self) -> None:
         super().reset()
@@ -175,20 +202,30 @@ class AdaptiveTimeSurface(TimeSurface):
         t_pad = np.full((hp, self._wp), NEVER, np.int64)
         self.t_last = t_pad[pad:pad + self.height, pad:pad + self.width]  # a view: same values, public shape
         self._t_flat = t_pad.reshape(-1)
-        # per pixel: n ring indices, most recent first (4 bits each); see kern._ats_update
-        self._rec = np.full(hp * self._wp, kern._ring_list_init(self._n), np.int64)
+        if self.cfg.tau_mode == "fire_age":  # the render reads the times only
+            self._rec = np.zeros(1, np.int64)
+        else:  # per pixel: n ring indices, most recent first (4 bits each); see kern._ats_update
+            self._rec = np.full(hp * self._wp, kern._ring_list_init(self._n), np.int64)
 
     def _ingest(self, batch: EventBatch) -> int:
+        if self._mode == 2:
+            return int(kern._set_last_padded(self._t_flat, batch.x, batch.y, batch.t, self.width, self.height,
+                                             self._wp, self._pad))
         return int(kern._ats_update(self._t_flat, self._rec, batch.x, batch.y, batch.t, self._ring_off,
                                     self._n, self.width, self.height, self._wp, self._pad))
 
     def _run(self, t_ns: int | None, want_tau: bool) -> None:
         c = self.cfg
+        if self._fast and not want_tau:
+            kern._fire_age_render(self._t_flat, self._ring_off, self.width, self.height, self._wp, self._pad,
+                                  self._t(t_ns), c.tau_l_s, c.tau_u_s, self._gain, self._cutoff_s,
+                                  self._age, self._out)
+            return
         if want_tau and self._tau.shape != self._out.shape:
             self._tau = np.empty_like(self._out)
         kern._ats_render(self._t_flat, self._rec, self._ring_off, self._n, self.width, self.height, self._wp,
-                         self._pad, self._t(t_ns), c.tau_l_s, c.tau_u_s, self._mode, self._cutoff_s, self._out,
-                         self._tau, want_tau)
+                         self._pad, self._t(t_ns), c.tau_l_s, c.tau_u_s, self._mode, self._gain, self._cutoff_s,
+                         self._out, self._tau, want_tau)
 
     def render_raw(self, t_ns: int | None = None) -> np.ndarray:
         self._run(t_ns, False)
@@ -233,10 +270,14 @@ class SpeedInvariantTimeSurface(TimeSurface):
 
     def reset(self) -> None:
         super().reset()
-        self.surface = np.zeros((self.height, self.width), np.int32)
+        r = int(self.cfg.sits_radius_px)
+        # padded by r on every side (see kern._sits_update); surface is a view of the inside
+        self._padded = np.zeros((self.height + 2 * r, self.width + 2 * r), np.int16)
+        self.surface = self._padded[r:r + self.height, r:r + self.width]
 
     def _ingest(self, batch: EventBatch) -> int:
-        kern._sits_update(self.surface, batch.x, batch.y, int(self.cfg.sits_radius_px))
+        kern._sits_update(self._padded.reshape(-1), batch.x, batch.y, int(self.cfg.sits_radius_px), self.width,
+                          self.height, self._padded.shape[1])
         return super()._ingest(batch)
 
     def render_raw(self, t_ns: int | None = None) -> np.ndarray:

@@ -19,6 +19,8 @@ SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
                 "memory (RSS per minute) and latency over a long synthetic run: is anything growing?"),
     "real": ("atsvo_ros.tools.bench_real", "add_real_args", "main_real",
              "our RGB-D odometry vs Open3D's on real TUM RGB-D sequences (ATE, RPE, time, wrong-but-ok frames)"),
+    "ats-basin": ("atsvo_ros.tools.bench_ats", "add_ats_basin_args", "main_ats_basin",
+                  "convergence basin of the ATS term alone per decay rule (synthetic, simulated and real events)"),
 }
 
 
