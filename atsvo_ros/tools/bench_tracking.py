@@ -86,36 +86,37 @@ def simulated_events(spec: Any, progress: bool = True) -> Any:
     return ev
 
 
-def flicker_events(events: Any, factor: float, flicker_hz: float = 100.0, seed: int = 0) -> Any:
-    """``events`` plus a flickering lamp that multiplies the mean event rate by ``factor``.
+def flicker_events(events: Any, t0_ns: int, t1_ns: int, rate_ev_s: float, rng: np.random.Generator,
+                   flicker_hz: float = 100.0) -> Any:
+    """``events`` (those of ``[t0_ns, t1_ns)``) plus a flickering lamp firing ``rate_ev_s`` events per second.
 
-    The lamp covers a quarter of the sensor (a centred rectangle); at each flicker period every lamp
-    pixel fires the same number of ON events in the rising half and OFF events in the falling half,
-    at random times (mains-powered lights flicker at 100 Hz: what floods a real event camera indoors).
+    The lamp covers a quarter of the sensor (a centred rectangle) and fires ON events in the rising
+    half of each flicker period and OFF events in the falling half, at random pixels and times
+    (mains-powered lights flicker at 100 Hz: what floods a real event camera indoors). Generated per
+    slice, so a 10x flood of a long sequence never sits in memory at once.
     """
     from atsvo_ros.core.events import EventBatch
 
-    if factor <= 1.0 or len(events) == 0:
+    n = int(rng.poisson(rate_ev_s * max(0, t1_ns - t0_ns) * 1e-9))
+    if n == 0:
         return events
-    rng = np.random.default_rng(seed)
     w, h = events.width, events.height
-    xs, ys = np.meshgrid(np.arange(w // 4, 3 * w // 4), np.arange(h // 4, 3 * h // 4))
-    xs, ys = xs.ravel(), ys.ravel()
-    t0, t1 = events.t_first_ns, events.t_last_ns
+    t = np.sort(rng.integers(t0_ns, t1_ns, n)).astype(np.int64)
     period_ns = int(1e9 / flicker_hz)
-    n_periods = max(1, (t1 - t0) // period_ns)
-    extra = int((factor - 1.0) * len(events))
-    per_period = max(1, extra // n_periods)
-    start = t0 + period_ns * np.repeat(np.arange(n_periods, dtype=np.int64), per_period)
-    phase = rng.integers(0, period_ns, len(start))
-    pix = rng.integers(0, len(xs), len(start))
-    lamp = EventBatch(xs[pix], ys[pix], start + phase, (phase < period_ns // 2).astype(np.uint8), w, h)
+    lamp = EventBatch(rng.integers(w // 4, 3 * w // 4, n), rng.integers(h // 4, 3 * h // 4, n), t,
+                      ((t % period_ns) < period_ns // 2).astype(np.uint8), w, h)
     both = EventBatch.concatenate([events, lamp])
     return both.select(np.argsort(both.t, kind="stable"))
 
 
-def _interleaved(frames: list, imu: Any, events: Any = None) -> Iterator[tuple[str, Any]]:
-    """Frames, IMU samples and events in time order, as a live robot delivers them (all data up to each frame first)."""
+def _interleaved(frames: list, imu: Any, events: Any = None, flood_ev_s: float = 0.0,
+                 seed: int = 0) -> Iterator[tuple[str, Any]]:
+    """Frames, IMU samples and events in time order, as a live robot delivers them (all data up to each frame first).
+
+    ``flood_ev_s`` > 0 adds a flickering lamp's events (:func:`flicker_events`) at that rate.
+    """
+    rng = np.random.default_rng(seed)
+    t_prev = None if events is None or not len(events) else events.t_first_ns
     k = 0
     n_imu = 0 if imu is None else len(imu)
     e0 = 0
@@ -128,7 +129,11 @@ def _interleaved(frames: list, imu: Any, events: Any = None) -> Iterator[tuple[s
             k = j
         if events is not None:
             e1 = int(np.searchsorted(events.t, stamp, side="right"))
-            yield "events", (events.select(slice(e0, e1)), stamp)
+            batch = events.select(slice(e0, e1))
+            if flood_ev_s > 0 and t_prev is not None and stamp > t_prev:
+                batch = flicker_events(batch, t_prev, stamp + 1, flood_ev_s, rng)
+                t_prev = stamp + 1
+            yield "events", (batch, stamp)
             e0 = e1
         yield "frame", (stamp, rgb, depth)
 
@@ -148,14 +153,15 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
                         height=height)
     frames, imu, sim = simulated_frames(spec, progress)
     events = simulated_events(spec, progress) if use_events else None
-    if events is not None and flood_factor > 1.0:
-        events = flicker_events(events, flood_factor, seed=seed)
+    flood_ev_s = 0.0
+    if events is not None and flood_factor > 1.0 and len(events) > 1:
+        flood_ev_s = (flood_factor - 1.0) * len(events) / ((events.t_last_ns - events.t_first_ns) * 1e-9)
     cfg = load_config(spec.config or "synthetic", overrides=overrides)
     rt = OdometryRuntime(cfg, sim.rig.rgb_camera, sim.rig.event_camera,
                          use_events=use_events and cfg.mode == "fused")
     results, cpu = [], []
     t_wall = time.perf_counter()
-    for kind, item in _interleaved(frames, imu if use_imu else None, events):
+    for kind, item in _interleaved(frames, imu if use_imu else None, events, flood_ev_s, seed):
         if kind == "imu":
             rt.add_imu(item)
             continue
@@ -194,7 +200,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
         "track_ms_p90": float(np.percentile(times, 90)) if len(times) else None,
         "frame_cpu_ms_median": float(np.median(cpu) * 1e3) if cpu else None, "wall_s": wall,
         "statuses": dict(Counter(statuses)), "keyframes": getattr(rt.core, "n_keyframes", None),
-        "modes": dict(Counter(r.mode for r in results)), "events": 0 if events is None else len(events),
+        "modes": dict(Counter(r.mode for r in results)), "events": int(rt.counters.get("events", 0)),
         "fused_ms_median": float(np.median(fused_t)) if len(fused_t) else None,
         "max_error_cm": float(err_m.max() * 100.0), "status_left_ok_in_time": bool(flagged),
         "latency_ms_p50": float(np.median(all_t)), "latency_ms_p99": float(np.percentile(all_t, 99)),
