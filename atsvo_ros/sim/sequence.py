@@ -20,6 +20,7 @@ the config's base frame (for MVSEC, base = camera), so camera = ``T_world_base @
 """
 from __future__ import annotations
 
+import hashlib
 import heapq
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -41,6 +42,9 @@ from atsvo_ros.sim.scene import Scene, make_scene
 
 LAYOUTS = ("robot", "mvsec")
 DEFAULT_START_NS = 1_700_000_000_000_000_000
+#: Bump whenever the simulator's output for an unchanged spec changes (sensor models, rendering, motion):
+#: caches of generated sequences key on :func:`model_key`. 2: the DVXplorer's scanned readout and pixel reset.
+MODEL_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -398,10 +402,17 @@ def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
         yield item
 
 
+def model_key() -> str:
+    """Identity of the simulator's models: ``m<MODEL_VERSION>-<hash of the default spec>``, so that a new model
+    version or a changed default (e.g. an ``EventModel`` parameter) never reuses a sequence generated before."""
+    digest = hashlib.sha1(f"{MODEL_VERSION}|{SequenceSpec()!r}".encode()).hexdigest()[:8]
+    return f"m{MODEL_VERSION}-{digest}"
+
+
 def make_simulation(spec: SequenceSpec, scene: Scene | None = None) -> Simulation:
     """A :class:`Simulation` (poses, rig, per-sensor streams) without starting the merged iterator."""
     return Simulation(spec, scene)
 
 
 __all__ = ["GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation", "iter_sequence",
-           "make_motion", "make_scene", "make_simulation", "sequence_rig"]
+           "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig"]

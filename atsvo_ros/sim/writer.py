@@ -27,7 +27,7 @@ from atsvo_ros.errors import SimulationError
 from atsvo_ros.io.encode import ENCODINGS, serialize_dvs_event_array, serialize_event_packet
 from atsvo_ros.io.msgtypes import typestore
 from atsvo_ros.io.trajectory import Trajectory, write_tum
-from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, SimRig, iter_sequence, sequence_rig
+from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, SimRig, iter_sequence, model_key, sequence_rig
 
 FORMATS = ("mcap", "sqlite3", "ros1")
 EVENT_MSGS = ("packet", "dvs")
@@ -361,7 +361,7 @@ def _write_description(path: Path, spec: SequenceSpec, rig: SimRig, topics: BagT
         return v
 
     doc = {
-        "generator": "atsvo-sim",
+        "generator": "atsvo-sim", "model": model_key(),
         "scenario": spec.scenario, "seed": spec.seed, "duration_s": spec.duration_s, "layout": spec.layout,
         "format": fmt, "config": spec.config or ("mvsec" if spec.layout == "mvsec" else "synthetic"),
         "event_message": topics.events[1], "event_encoding": encoding if event_msg == "packet" else None,

@@ -33,9 +33,12 @@ def cache_dir(override: str | None = None) -> Path:
 
 
 def sequence_path(cache: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = ()) -> Path:
-    """Where the bag of one (scenario, duration, seed, extra simulator options) lives in the cache."""
+    """Where the bag of one (scenario, duration, seed, extra simulator options) lives in the cache; the key
+    includes the simulator's model identity, so a changed sensor model never replays an old sequence."""
+    from atsvo_ros.sim.sequence import model_key
+
     extra = "".join(f"_{a.lstrip('-')}" for a in sim_args)
-    return cache / f"sim_v{CACHE_VERSION}_{scenario}_{duration_s:g}s_seed{seed}{extra}"
+    return cache / f"sim_v{CACHE_VERSION}_{model_key()}_{scenario}_{duration_s:g}s_seed{seed}{extra}"
 
 
 def simulate(out: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = (),

@@ -11,6 +11,7 @@ import dataclasses
 import sys
 from collections.abc import Sequence
 
+from atsvo_ros.sim.events import EventModel
 from atsvo_ros.sim.motion import SCENARIOS
 from atsvo_ros.sim.sequence import LAYOUTS, SequenceSpec
 from atsvo_ros.sim.writer import EVENT_ENCODINGS, EVENT_MSGS, FORMATS, write_sequence
@@ -22,12 +23,7 @@ def _main(args: argparse.Namespace) -> int:
                         config=args.config, width=args.width, height=args.height, rate_hz=args.rate,
                         exposure_s=args.exposure, gt_rate_hz=args.gt_rate, event_packet_s=args.packet_ms * 1e-3,
                         event_scale=args.event_scale, texture_size=args.texture_size, imu=not args.no_imu)
-    if args.noise_rate is not None or args.contrast is not None:
-        em = spec.event_model
-        em = dataclasses.replace(em, noise_rate_hz=em.noise_rate_hz if args.noise_rate is None else args.noise_rate,
-                                 contrast_pos=args.contrast or em.contrast_pos,
-                                 contrast_neg=args.contrast or em.contrast_neg)
-        spec = dataclasses.replace(spec, event_model=em)
+    spec = dataclasses.replace(spec, event_model=_event_model(spec.event_model, args))
     if args.rgb_readout:
         spec = dataclasses.replace(spec, rgb_model=dataclasses.replace(spec.rgb_model, readout_time_s=args.rgb_readout))
     summary = write_sequence(spec, args.out, fmt=args.format, event_msg=args.event_msg, encoding=args.encoding,
@@ -38,6 +34,22 @@ def _main(args: argparse.Namespace) -> int:
           f"{summary['poses']} poses, {summary['imu_samples']} IMU samples; "
           f"{summary['wall_s']:.1f} s wall -> {summary['bag']}", file=sys.stderr)
     return 0
+
+
+def _event_model(em: EventModel, args: argparse.Namespace) -> EventModel:
+    """The default event model with the command line's overrides (a new scan period keeps the column sweep's
+    share of it)."""
+    changes: dict = {}
+    if args.contrast is not None:
+        changes.update(contrast_pos=args.contrast, contrast_neg=args.contrast)
+    if args.noise_rate is not None:
+        changes["noise_rate_hz"] = args.noise_rate
+    if args.refractory_us is not None:
+        changes["refractory_s"] = args.refractory_us * 1e-6
+    if args.scan_period_us is not None:
+        changes.update(scan_period_s=args.scan_period_us * 1e-6,
+                       scan_sweep_s=args.scan_period_us * 1e-6 * em.scan_sweep_s / em.scan_period_s)
+    return dataclasses.replace(em, **changes)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -66,8 +78,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--packet-ms", type=float, default=1.0, help="event packet length in ms (default 1)")
     p.add_argument("--event-scale", type=float, default=1.0, help="scale the event sensor size (tests)")
     p.add_argument("--texture-size", type=int, default=512, help="texture side in texels (power of two)")
-    p.add_argument("--contrast", type=float, default=None, help="event contrast threshold C+ = C- (default 0.2)")
-    p.add_argument("--noise-rate", type=float, default=None, help="background events per pixel per s (0.1)")
+    em = EventModel()
+    p.add_argument("--contrast", type=float, default=None,
+                   help=f"event contrast threshold C+ = C- in log units (default {em.contrast_pos:g})")
+    p.add_argument("--noise-rate", type=float, default=None,
+                   help=f"background events per pixel per s (default {em.noise_rate_hz:g})")
+    p.add_argument("--scan-period-us", type=float, default=None,
+                   help=f"event readout scan period in us (default {em.scan_period_s * 1e6:g}: the DVXplorer's "
+                        "~5 kHz scans, events stamped when their column is read); 0 = asynchronous (DAVIS)")
+    p.add_argument("--refractory-us", type=float, default=None,
+                   help=f"pixel reset after an event in us; change during it is lost (default "
+                        f"{em.refractory_s * 1e6:g}, between one and two scans as measured)")
     p.add_argument("--no-imu", action="store_true", help="layout robot: no IMU topic (default: the D455's "
                    "BMI055 on /camera/camera/imu at ~200 Hz)")
     p.add_argument("--force", action="store_true", help="replace an existing atsvo-sim output in --out")
