@@ -70,9 +70,10 @@ def simulated_events(spec: Any, progress: bool = True) -> Any:
     from tqdm import tqdm
 
     from atsvo_ros.core.events import EventBatch
-    from atsvo_ros.sim.sequence import make_simulation
+    from atsvo_ros.sim.sequence import make_simulation, model_key
 
-    path = _cache_file(spec).with_name(_cache_file(spec).stem + "_events.npz")
+    # the event model changes more often than the colour/depth one: its own key (a new model, new events)
+    path = _cache_file(spec).with_name(f"{_cache_file(spec).stem}_events_{model_key()}.npz")
     if path.is_file():
         with np.load(path) as z:
             return EventBatch(z["x"], z["y"], z["t"], z["p"], int(z["w"]), int(z["h"]))
