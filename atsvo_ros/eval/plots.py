@@ -129,4 +129,59 @@ def plot_run(out_dir: str | Path, est: Trajectory, result: EvalResult | None = N
     return paths
 
 
-__all__ = ["plot_run", "rpy_deg"]
+_COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:purple", "tab:orange", "tab:brown")
+
+
+def plot_comparison(path: str | Path, runs: dict[str, EvalResult], title: str = "") -> Path:
+    """One figure comparing several estimates of the same sequence (each aligned to ground truth by its
+    own evaluation): side and top views, height and pitch over time, position error over time.
+
+    ``runs`` maps a label (e.g. ``fused``) to the :class:`EvalResult` of that run; ground truth is
+    drawn from the first. Returns the written path.
+    """
+    if not runs:
+        raise ValueError("plot_comparison needs at least one run")
+    plt = _plt()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    first = next(iter(runs.values()))
+    fig, axes = plt.subplots(2, 2, figsize=(12, 8))
+    G = first.T_w_gt
+    t_gt = (first.stamps_ns - first.stamps_ns[0]) * 1e-9
+    for ax, (i, j, name) in zip(axes[0], ((0, 2, "side view (x-z)"), (0, 1, "top view (x-y)"))):
+        ax.plot(G[:, i, 3], G[:, j, 3], "k-", lw=2.0, label="ground truth")
+        for (label, r), colour in zip(runs.items(), _COLOURS):
+            ate = r.metrics["ate_rmse_m"] * 100.0
+            ax.plot(r.T_w_est[:, i, 3], r.T_w_est[:, j, 3], "-", color=colour, lw=1.0,
+                    label=f"{label} (ATE {ate:.1f} cm)")
+        ax.set_xlabel("xyz"[i] + " [m]")
+        ax.set_ylabel("xyz"[j] + " [m]")
+        ax.set_title(name)
+        ax.axis("equal")
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(loc="best", fontsize=8)
+    ax = axes[1, 0]
+    ax.plot(t_gt, rpy_deg(G)[:, 1], "k-", lw=2.0, label="ground truth")
+    for (label, r), colour in zip(runs.items(), _COLOURS):
+        ax.plot((r.stamps_ns - first.stamps_ns[0]) * 1e-9, rpy_deg(r.T_w_est)[:, 1], "-", color=colour, lw=1.0,
+                label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("pitch [deg]")
+    ax.grid(True, alpha=0.3)
+    ax = axes[1, 1]
+    for (label, r), colour in zip(runs.items(), _COLOURS):
+        ax.plot((r.stamps_ns - first.stamps_ns[0]) * 1e-9, r.position_errors_m * 100.0, "-", color=colour, lw=1.0,
+                label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position error [cm]")
+    ax.set_yscale("log")
+    ax.grid(True, alpha=0.3, which="both")
+    ax.legend(loc="best", fontsize=8)
+    fig.suptitle(title or "comparison")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+__all__ = ["plot_comparison", "plot_run", "rpy_deg"]

@@ -108,10 +108,18 @@ def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAUL
     bag = ensure_sequence(cache_dir(cache), scenario, duration_s, seed, regenerate, sim_args,
                           quiet=progress is False)
     rows = []
+    evaluations = {}
     for mode in MODES:
         res = replay(bag, out / mode, load_config("synthetic"), mode=mode, progress=progress)
         rows.append({"mode": res.mode, "metrics": res.metrics, "rtf": res.real_time_factor,
                      "out": str(out / mode), "notes": res.notes})
+        if res.evaluation is not None:
+            evaluations[res.mode] = res.evaluation
+    if evaluations:
+        from atsvo_ros.eval.plots import plot_comparison
+
+        plot_comparison(out / "comparison.png", evaluations,
+                        title=f"{scenario}, {duration_s:g} s, seed {seed}: every mode against ground truth")
     return rows
 
 
@@ -131,7 +139,8 @@ def _main(args: argparse.Namespace) -> int:
         for note in r["notes"]:
             if note.startswith("warning: "):
                 print(f"atsvo-demo: {r['mode']}: {note}", file=sys.stderr)
-    print(f"\ntrajectories, metrics.json and plots in {out}/<mode>/")
+    print(f"\ntrajectories, metrics.json and plots in {out}/<mode>/; all modes side by side in "
+          f"{out / 'comparison.png'}")
     if args.max_ate_cm is not None:
         return check_accuracy(rows, args.max_ate_cm)
     return 0

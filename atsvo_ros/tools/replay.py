@@ -48,6 +48,8 @@ class ReplayResult:
     bag_duration_s: float
     metrics: dict[str, Any] | None = None
     notes: list[str] = field(default_factory=list)
+    #: the full evaluation against ground truth (aligned poses, errors), when there was ground truth
+    evaluation: Any = None
 
     @property
     def real_time_factor(self) -> float:
@@ -212,6 +214,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         opts = eval_options or EvalOptions(interpolate_gt=True)
         eval_result = evaluate(gt, est, opts, est_ok=ok)
         result.metrics = eval_result.to_json()
+        result.evaluation = eval_result
         (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2) + "\n")
     if plots:
         from atsvo_ros.eval.plots import plot_run

@@ -5,7 +5,7 @@ import numpy as np
 
 from atsvo_ros.core.geometry import so3_exp
 from atsvo_ros.eval.metrics import EvalOptions, evaluate
-from atsvo_ros.eval.plots import plot_run, rpy_deg
+from atsvo_ros.eval.plots import plot_comparison, plot_run, rpy_deg
 from atsvo_ros.io.trajectory import Trajectory
 
 
@@ -31,3 +31,23 @@ def test_plot_run_with_and_without_ground_truth(tmp_path):
     names = {p.name for p in plot_run(tmp_path / "a", traj, res)}
     assert names == {"trajectory.png", "position.png", "orientation.png", "error.png"}
     assert {p.name for p in plot_run(tmp_path / "b", traj)} == {"trajectory.png", "position.png", "orientation.png"}
+
+
+def test_plot_comparison_draws_every_run_against_ground_truth(tmp_path):
+    import matplotlib.image as mpimg
+    import pytest
+
+    n = 60
+    T = np.repeat(np.eye(4)[None], n, 0)
+    T[:, 0, 3] = np.linspace(0, 1, n)
+    T[:, 1, 3] = np.sin(np.linspace(0, 3, n))
+    gt = Trajectory(np.arange(n) * 33_000_000, T)
+    off = T.copy()
+    off[:, 2, 3] += np.linspace(0, 0.2, n)  # a drifting estimate
+    runs = {"fused": evaluate(gt, gt, EvalOptions(align="se3")),
+            "rgbd": evaluate(gt, Trajectory(gt.stamps_ns, off), EvalOptions(align="none"))}
+    path = plot_comparison(tmp_path / "c" / "comparison.png", runs, title="t")
+    img = mpimg.imread(path)
+    assert img.shape[0] > 500 and img.shape[1] > 800 and img.std() > 0.05  # a drawn figure, not a blank page
+    with pytest.raises(ValueError):
+        plot_comparison(tmp_path / "d.png", {})

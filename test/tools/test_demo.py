@@ -73,6 +73,7 @@ def test_demo_end_to_end_with_the_real_simulator_and_odometry(tmp_path, capsys):
             "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out"), "--no-progress"]
     assert demo_mod.main(argv) == 0
     text = capsys.readouterr().out
+    assert (tmp_path / "out" / "comparison.png").is_file()
     for mode in demo_mod.MODES:
         doc = json.loads((tmp_path / "out" / mode / "metrics.json").read_text())
         assert doc["n_matched"] >= 15
