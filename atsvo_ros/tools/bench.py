@@ -1,5 +1,6 @@
-"""``atsvo-bench SUBCOMMAND``: benchmarks (never timed tests). Subcommands live in their own modules
-and are registered in :data:`SUBCOMMANDS` with one line each."""
+"""``atsvo-bench [--quick] --out DIR`` runs every benchmark (:mod:`atsvo_ros.tools.bench_all`); ``atsvo-bench
+SUBCOMMAND`` runs one. Benchmarks, never timed tests. Subcommands live in their own modules and are
+registered in :data:`SUBCOMMANDS` with one line each."""
 from __future__ import annotations
 
 import argparse
@@ -14,7 +15,7 @@ SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
     "events": ("atsvo_ros.tools.bench_events", "add_events_args", "main_events",
                "event decoding and time-surface speed vs rosbags and dv-processing"),
     "tracking": ("atsvo_ros.tools.bench_tracking", "add_tracking_args", "main_tracking",
-                 "RGB-D tracking time per frame and accuracy on synthetic trot/flying sequences"),
+                 "tracking time per frame and accuracy on synthetic legged-robot sequences (RGB-D, --events: fused)"),
     "longrun": ("atsvo_ros.tools.bench_longrun", "add_longrun_args", "main_longrun",
                 "memory (RSS per minute) and latency over a long synthetic run: is anything growing?"),
     "real": ("atsvo_ros.tools.bench_real", "add_real_args", "main_real",
@@ -25,8 +26,12 @@ SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="atsvo-bench", description=__doc__.split("\n")[0].strip("`: "))
-    sub = p.add_subparsers(dest="command", required=True)
+    from atsvo_ros.tools.bench_all import add_all_args
+
+    p = argparse.ArgumentParser(prog="atsvo-bench", description="every benchmark in one run, side by side with the "
+                                "peers (results.json, results.md), or one of them with a subcommand")
+    add_all_args(p)
+    sub = p.add_subparsers(dest="command", required=False)
     for name, (module, add_args, main_fn, help_text) in SUBCOMMANDS.items():
         sp = sub.add_parser(name, help=help_text, description=help_text)
         getattr(importlib.import_module(module), add_args)(sp)
@@ -35,6 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    if args.command is None:
+        from atsvo_ros.tools.bench_all import main_all
+
+        return main_all(args)
     module, main_fn = args._target
     return int(getattr(importlib.import_module(module), main_fn)(args) or 0)
 

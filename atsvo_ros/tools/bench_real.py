@@ -168,7 +168,7 @@ def bench_folder(folder: Path, preset: str | None, base_overrides: dict[str, Any
     return seq
 
 
-def _cells(row: dict[str, Any]) -> list[str]:
+def row_cells(row: dict[str, Any]) -> list[str]:
     out = []
     for key, _, fmt in COLUMNS:
         v = row.get(key)
@@ -181,7 +181,7 @@ def _cells(row: dict[str, Any]) -> list[str]:
 
 def _print_row(row: dict[str, Any]) -> None:
     print("  " + "  ".join(f"{c:>{max(len(h), 12) if i else 28}}" for i, (c, (_, h, _)) in
-                           enumerate(zip(_cells(row), COLUMNS))), flush=True)
+                           enumerate(zip(row_cells(row), COLUMNS))), flush=True)
 
 
 def markdown(results: dict[str, Any]) -> str:
@@ -192,7 +192,7 @@ def markdown(results: dict[str, Any]) -> str:
                   f"Pairing: {seq['pairing']}.", "",
                   "| " + " | ".join(h for _, h, _ in COLUMNS) + " |",
                   "|" + "|".join("---" if i == 0 else "---:" for i in range(len(COLUMNS))) + "|"]
-        lines += ["| " + " | ".join(_cells(r)) + " |" for r in seq["rows"]]
+        lines += ["| " + " | ".join(row_cells(r)) + " |" for r in seq["rows"]]
         overrides = [f"`{r['method']}`: " + ", ".join(f"{k}={v}" for k, v in r["overrides"].items())
                      for r in seq["rows"] if r.get("overrides")]
         lines += [""] + [f"- {o}" for o in overrides] + ([""] if overrides else [])
@@ -279,5 +279,5 @@ def main_real(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["BAD_ROT_DEG", "DEFAULT_FOLDER", "add_real_args", "bench_folder", "main_real", "markdown", "parse_variant",
-           "score"]
+__all__ = ["BAD_ROT_DEG", "COLUMNS", "DEFAULT_FOLDER", "PAPER_VARIANT", "add_real_args", "bench_folder", "main_real",
+           "markdown", "parse_variant", "row_cells", "score"]
