@@ -3,8 +3,9 @@
 Sensor data goes in as it arrives, in any interleaving: colour and depth images (arrays or
 sensor_msgs messages), event batches (or event messages, decoded here with the vectorised
 decoders), IMU samples and camera_info. The :class:`~atsvo_ros.io.sync.FrameAssembler` pairs colour
-with depth and cuts the event stream at frame stamps; the IMU stream is cut at the same stamps, so
-the core sees, for every frame, exactly the samples up to its exposure time whatever order they
+with depth and cuts the event stream at frame stamps; the IMU stream is cut at the same stamps (a
+frame waits until the IMU has passed it, unless the IMU is silent for :attr:`OdometryRuntime.IMU_STALL_NS`),
+so the core sees, for every frame, exactly the samples up to its exposure time whatever order they
 arrived in (the replay and the ROS node give the same poses). :meth:`OdometryRuntime.poll` runs the
 core on every frame that became complete and returns one :class:`RuntimeOutput` per frame.
 
@@ -112,6 +113,8 @@ class OdometryRuntime:
     MAX_HELD_EVENT_MSGS = 2000
     #: IMU samples kept waiting for a frame (a stream without frames does not grow memory).
     IMU_KEEP_NS = 2_000_000_000
+    #: A frame waits for the IMU sample after it unless the IMU is this far behind the other streams.
+    IMU_STALL_NS = 100_000_000
 
     def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel | None = None,
                  event_camera: CameraModel | None = None, *, use_events: bool | None = None,
@@ -135,6 +138,8 @@ class OdometryRuntime:
         self._decoders: dict[str, Any] = {}
         self._imu: list[ImuBatch] = []  # samples after the last frame's cut
         self._imu_cut_ns: int | None = None
+        self._imu_mark_ns: int | None = None  # newest IMU stamp received
+        self._await_imu: deque[tuple[RgbdFrame, EventBatch]] = deque()  # paired frames waiting for the IMU
         self._offset_ns = int(round(config.rgb_camera.time_offset_s * 1e9))
         self._held: deque[FrameInput] = deque()  # frames waiting for the colour camera_info
         self._held_events: deque[tuple[Any, str, str]] = deque()  # event messages waiting for the event camera
@@ -258,7 +263,7 @@ class OdometryRuntime:
         if cut is not None and batch.t_first_ns <= cut:
             if batch.t_last_ns < cut - int(self.CLOCK_JUMP_S * 1e9):
                 self._imu.clear()  # clock jump (bag loop): the samples belong to the new timeline
-                self._imu_cut_ns = None
+                self._imu_cut_ns = self._imu_mark_ns = None
             else:
                 late = batch.stamps_ns <= cut
                 n_late = int(np.count_nonzero(late))
@@ -269,6 +274,7 @@ class OdometryRuntime:
                     return
         self._imu.append(batch)
         newest = batch.t_last_ns
+        self._imu_mark_ns = newest if self._imu_mark_ns is None else max(self._imu_mark_ns, newest)
         while len(self._imu) > 1 and self._imu[0].t_last_ns < newest - self.IMU_KEEP_NS:
             self._imu.pop(0)
 
@@ -292,11 +298,13 @@ class OdometryRuntime:
 
     def pop_ready(self) -> list[FrameInput]:
         """The frames that became complete (oldest first), for :meth:`process` (possibly in another thread)."""
-        return self._release(self.assembler.pop_ready())
+        self._await_imu.extend(self.assembler.pop_ready())
+        return self._release(self._imu_ready(final=False))
 
     def flush_inputs(self) -> list[FrameInput]:
         """End of stream: every frame that can still be paired, for :meth:`process`."""
-        return self._release(self.assembler.flush())
+        self._await_imu.extend(self.assembler.flush())
+        return self._release(self._imu_ready(final=True))
 
     def process(self, inp: FrameInput) -> RuntimeOutput | None:
         """Run the core on one frame (its IMU samples and events first); None when the frame is skipped."""
@@ -331,6 +339,11 @@ class OdometryRuntime:
         """Images and pairs held back by the assembler (bounded)."""
         return self.assembler.pending
 
+    @property
+    def frames_waiting(self) -> int:
+        """Paired frames not handed out yet: waiting for events, IMU samples or the camera_info (bounded)."""
+        return self.assembler.n_pairs + len(self._await_imu) + len(self._held)
+
     # ------------------------------------------------------------------ internals
     def _camera(self, msg: Any, which: str) -> CameraModel | None:
         try:
@@ -346,6 +359,18 @@ class OdometryRuntime:
             ev_cam = self.event_camera or self.config.event_camera.model()
             self.core = self._factory(self.config, self.rgb_camera, ev_cam if self.use_events else None)
         return self.core
+
+    def _imu_ready(self, final: bool) -> list[tuple[RgbdFrame, EventBatch]]:
+        """Paired frames whose IMU samples are all in: the IMU passed the frame, is silent, or never spoke."""
+        out = []
+        mark = self._imu_mark_ns
+        newest = self.assembler.newest_ns
+        stalled = mark is None or (newest is not None and newest - mark > self.IMU_STALL_NS)
+        while self._await_imu:
+            if not (final or stalled) and mark < int(self._await_imu[0][0].stamp_ns) + self._offset_ns:
+                break
+            out.append(self._await_imu.popleft())
+        return out
 
     def _cut_imu(self, stamp_ns: int) -> ImuBatch:
         """The buffered IMU samples up to a frame's exposure time (its stamp plus the colour time offset)."""

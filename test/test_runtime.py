@@ -203,16 +203,8 @@ def _rgbd_and_imu(bag):
 
 def _feed(rt, cfg, items):
     outs = []
-    for topic, msg in items:
-        if topic == cfg.topics.rgb_info:
-            rt.on_rgb_camera_info(msg)
-        elif topic == cfg.topics.rgb:
-            rt.add_rgb_msg(msg)
-        elif topic == cfg.topics.depth:
-            rt.add_depth_msg(msg)
-        else:
-            rt.add_imu_msg(msg)
-        outs += rt.poll()
+    for item in items:
+        outs += _poll_one(rt, cfg, item)
     return outs + rt.flush()
 
 
@@ -222,22 +214,24 @@ def test_each_frame_gets_the_imu_samples_up_to_its_stamp_whatever_the_arrival_or
 
     cfg, msgs = _rgbd_and_imu(bag)
     runs = []
-    # recorded order; IMU delivered up to 30 ms early; IMU held back until just before each frame's depth image
+    # recorded order; IMU delivered 30 ms early; 20 ms late (frames wait for it); held back until just before
+    # each frame's depth image
     imu = [m for m in msgs if m[0] == cfg.topics.imu]
     other = [m for m in msgs if m[0] != cfg.topics.imu]
     early = sorted(msgs, key=lambda m: stamp_ns(m[1]) - (30_000_000 if m[0] == cfg.topics.imu else 0))
+    late = sorted(msgs, key=lambda m: stamp_ns(m[1]) + (20_000_000 if m[0] == cfg.topics.imu else 0))
     held = []
     for m in other:
         if m[0] == cfg.topics.depth:
             held += [i for i in imu if stamp_ns(i[1]) <= stamp_ns(m[1])]
             imu = [i for i in imu if stamp_ns(i[1]) > stamp_ns(m[1])]
         held.append(m)
-    for order in (msgs, early, held):
+    for order in (msgs, early, late, held):
         rt = OdometryRuntime(cfg, core_factory=_ImuRecording)
         assert len(_feed(rt, cfg, order)) >= 15
         runs.append(rt.core.seen)
         assert rt.counters["imu_late"] == 0
-    assert runs[0] == runs[1] == runs[2]
+    assert runs[0] == runs[1] == runs[2] == runs[3]
     assert all(max(samples) <= stamp for stamp, samples in runs[0] if samples)  # nothing from after the frame
     assert all(samples for _, samples in runs[0][1:])  # the first frame precedes the first sample
 
@@ -292,3 +286,33 @@ def test_event_messages_wait_for_the_event_camera_info(bag):
     assert rt.counters["event_msgs"] == 50
     assert rt.decoder_stats[cfg.topics.events]["width"] == info.width
     assert rt.decoder_stats[cfg.topics.events]["dropped_out_of_range"] == 0
+
+
+def test_a_silent_imu_does_not_hold_frames_back(bag):
+    """The IMU stops half way: frames wait at most IMU_STALL_NS of stream time for it, then go without."""
+    from atsvo_ros.io.images import stamp_ns
+
+    cfg, msgs = _rgbd_and_imu(bag)
+    t_mid = stamp_ns(msgs[len(msgs) // 2][1])
+    cut = [m for m in msgs if m[0] != cfg.topics.imu or stamp_ns(m[1]) < t_mid]
+    rt = OdometryRuntime(cfg, core_factory=_ImuRecording)
+    outs = []
+    for item in cut:
+        outs += _poll_one(rt, cfg, item)
+    n_frames = sum(1 for t, _ in msgs if t == cfg.topics.rgb)
+    # every frame but the last few (within the stall window of the last image) is out before the flush
+    assert len(outs) >= n_frames - 1 - OdometryRuntime.IMU_STALL_NS // 33_000_000
+    assert len(outs) + len(rt.flush()) == n_frames
+
+
+def _poll_one(rt, cfg, item):
+    topic, msg = item
+    if topic == cfg.topics.rgb_info:
+        rt.on_rgb_camera_info(msg)
+    elif topic == cfg.topics.rgb:
+        rt.add_rgb_msg(msg)
+    elif topic == cfg.topics.depth:
+        rt.add_depth_msg(msg)
+    else:
+        rt.add_imu_msg(msg)
+    return rt.poll()
