@@ -54,9 +54,8 @@ def test_a_mapping_error_surfaces_in_the_tracking_thread():
             raise RuntimeError("mapping broke")
 
     cfg = load_config("synthetic")
-    from atsvo_ros.core.pyramid import pyramid_cameras
-
     from atsvo_ros.core.mapper import KeyframeRequest
+    from atsvo_ros.core.pyramid import pyramid_cameras
 
     port = ThreadedMapping(Broken(cfg, pyramid_cameras(cfg.rgb_camera.model(), 2)))
     req = KeyframeRequest(1, None, np.eye(4), (0.0, 0.0), np.zeros((0, 2)), np.zeros(0, np.int32))

@@ -64,5 +64,6 @@ def test_bench_real_runs_ours_and_variants_and_writes_the_table(tmp_path):
         assert r["frames"] == 5 and r["n_matched"] == 5 and r["ms_median"] > 0 and r["ok"] >= 3
         assert r["ate_cm"] < 2.0  # tiny, exact-pose sequence: the row is the real thing, not a placeholder
     md = (tmp_path / "o" / "results.md").read_text()
-    assert "| method | ATE cm | RPE deg/f | RPE cm/f | track ms med |" in md and "| atsvo_ros:few |" in md and "## Definitions" in md
+    assert "| method | ATE cm | RPE deg/f | RPE cm/f | track ms med |" in md
+    assert "| atsvo_ros:few |" in md and "## Definitions" in md
     assert (tmp_path / "o" / folder.name / "atsvo_ros_few" / "trajectory.tum").is_file()
