@@ -74,3 +74,13 @@ def test_setup_cfg_installs_scripts_where_ros2_run_looks():
     assert cfg["develop"]["script_dir"] == "$base/lib/atsvo_ros"
     assert cfg["install"]["install_scripts"] == "$base/lib/atsvo_ros"
     assert (ROOT / "resource" / "atsvo_ros").is_file()
+
+
+def test_ci_runs_the_readme_test_command_with_the_ros_tests_required():
+    """.ci/run: the README's test command verbatim, after .ci/ros_env.sh, with missing ROS pieces made fatal."""
+    readme = (ROOT / "README.md").read_text()
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    command = "pip install -e '.[test]' && python -m pytest -q"
+    assert command in readme and ci[-1] == command
+    assert ci.index("source .ci/ros_env.sh  # pip install -e '.[ros]', builds the messages (cached), exports the "
+                    "DDS settings") < ci.index("export ATSVO_REQUIRE_ROS=1") < len(ci) - 1
