@@ -128,6 +128,9 @@ class Window:
     def percentile(self, q: float) -> float:
         return float(np.percentile(np.fromiter(self._v, float), q)) if self._v else float("nan")
 
+    def mean(self) -> float:
+        return float(np.mean(np.fromiter(self._v, float))) if self._v else float("nan")
+
 
 def make_executor(kind: str, threads: int = 2) -> Any:
     """The executor named by ``node.executor`` (events, multi_threaded, single_threaded)."""
@@ -149,6 +152,8 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
     Ctrl-C and external shutdowns end it with 0. A bug in a worker thread (reported through
     ``node.fatal_error``) ends it with 1 after its traceback was logged.
     """
+    import os
+    sys.setswitchinterval(float(os.environ.get("ATSVO_SWITCH_S", sys.getswitchinterval())))
     rclpy.init(args=args if args is not None else sys.argv)
     nodes: list[Node] = []
     code = 0

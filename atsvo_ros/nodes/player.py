@@ -4,11 +4,16 @@ What the node tests and ``atsvo-bench nodes`` use in place of a camera driver an
 :class:`BagPlayer` publishes a bag's messages as they were recorded (the serialized bytes, no
 re-encoding) with sensor-data QoS, at ``rate`` times real time, and records when each frame's
 images went out; :class:`OdometryProbe` subscribes to the odometry (reliable, like a controller),
-the per-frame status, the map, the diagnostics and calls the reset service.
+the per-frame status, the map, the diagnostics and calls the reset service; :class:`NodeProcesses`
+starts the nodes as a user does (console scripts), samples their memory and stops them with Ctrl-C.
 """
 from __future__ import annotations
 
 import importlib
+import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterable
@@ -37,19 +42,23 @@ class Played:
     frame_sent_s: dict[int, float] = field(default_factory=dict)  # stamp -> monotonic time both images were out
     scheduled_s: dict[int, float] = field(default_factory=dict)  # stamp -> monotonic time it was due
     n_messages: int = 0
+    n_event_msgs: int = 0
     lag_s: list[float] = field(default_factory=list)  # how late each message went out
 
 
 class BagPlayer:
     """Publishes a ROS 2 bag's messages on their topics (see the module docstring)."""
 
-    def __init__(self, node: Node, bag: str | Path, topics: Iterable[str], rgb_topic: str, depth_topic: str) -> None:
+    def __init__(self, node: Node, bag: str | Path, topics: Iterable[str], rgb_topic: str, depth_topic: str,
+                 events_topic: str | None = None) -> None:
         from rosbags.highlevel import AnyReader
 
         from atsvo_ros.io.msgtypes import register_event_types
 
         self.node = node
-        self.rgb_topic, self.depth_topic = rgb_topic, depth_topic
+        self.rgb_topic, self.depth_topic, self.events_topic = rgb_topic, depth_topic, events_topic
+        self._events_msgtype: str | None = None
+        self._events_all = None
         wanted = set(topics)
         self.messages: list[tuple[int, str, bytes, int | None]] = []  # (log time, topic, cdr, header stamp)
         self.publishers: dict[str, Any] = {}
@@ -59,6 +68,9 @@ class BagPlayer:
             for c in conns:
                 if c.topic not in self.publishers:
                     self.publishers[c.topic] = node.create_publisher(message_class(c.msgtype), c.topic, SENSOR_QOS)
+            for c in conns:
+                if c.topic == events_topic:
+                    self._events_msgtype = c.msgtype
             for conn, t, raw in reader.messages(connections=conns):
                 raw = bytes(raw)
                 stamp = None
@@ -81,9 +93,46 @@ class BagPlayer:
             time.sleep(0.05)
         return False
 
-    def play(self, rate: float = 1.0, first: int = 0, last: int | None = None) -> Played:
-        """Publish messages ``first:last`` at ``rate`` x their recorded timing; blocks until done."""
-        msgs = self.messages[first:last]
+    def repacketized(self, packet_s: float) -> list[tuple[int, str, bytes, int | None]]:
+        """The messages with the event stream cut into packets of ``packet_s`` of recording time.
+
+        A camera driver publishes event packets at a fixed wall-clock rate (about 1 kHz), so a recording
+        played ``rate`` times faster should arrive in packets of ``rate`` ms, not ``rate`` times as many
+        1 ms packets. EventPacket streams only (re-encoded in their own encoding).
+        """
+        from atsvo_ros.core.events import EventBatch
+        from atsvo_ros.io.decode import EventDecoder
+        from atsvo_ros.io.encode import serialize_event_packet
+
+        if self.events_topic is None or not (self._events_msgtype or "").endswith("EventPacket"):
+            raise ValueError("re-packetizing needs an EventPacket events topic")
+        if self._events_all is None:
+            dec = EventDecoder(self._events_msgtype, 2)
+            raws = [m[2] for m in self.messages if m[1] == self.events_topic]
+            self._events_all = (EventBatch.concatenate([dec.decode_raw(r) for r in raws]), dec.stats.encoding)
+        events, encoding = self._events_all
+        rest = [m for m in self.messages if m[1] != self.events_topic]
+        if not len(events):
+            return rest
+        step = max(1, int(round(packet_s * 1e9)))
+        edges = np.arange(events.t_first_ns, events.t_last_ns + step, step, dtype=np.int64)
+        cuts = np.searchsorted(events.t, edges, side="left")
+        packets = []
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if b > a:
+                batch = events.select(slice(int(a), int(b)))
+                packets.append((batch.t_last_ns, self.events_topic, serialize_event_packet(batch, encoding), None))
+        return sorted(rest + packets, key=lambda m: m[0])
+
+    def play(self, rate: float = 1.0, first: int = 0, last: int | None = None,
+             event_packet_wall_s: float | None = None) -> Played:
+        """Publish messages ``first:last`` at ``rate`` x their recorded timing; blocks until done.
+
+        ``event_packet_wall_s``: re-cut the event stream so packets go out at this wall-clock period
+        whatever the rate (see :meth:`repacketized`).
+        """
+        base = self.repacketized(event_packet_wall_s * rate) if event_packet_wall_s else self.messages
+        msgs = base[first:last]
         out = Played()
         if not msgs:
             return out
@@ -97,6 +146,8 @@ class BagPlayer:
                 time.sleep(wait)
             self.publishers[topic].publish(raw)
             now = time.monotonic()
+            if topic == self.events_topic:
+                out.n_event_msgs += 1
             out.lag_s.append(now - due)
             out.n_messages += 1
             if stamp is not None:
@@ -215,4 +266,61 @@ class OdometryProbe:
         return future.result() if future.done() else None
 
 
-__all__ = ["BagPlayer", "OdometryProbe", "Played", "message_class"]
+def console_script(name: str) -> str:
+    """The console script ``name`` of this Python's environment (else whatever is on PATH)."""
+    path = Path(sys.executable).parent / name
+    return str(path) if path.exists() else name
+
+
+def rss_mb(pid: int) -> float | None:
+    """Resident memory of a process in MB (Linux /proc), None when it is gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+class NodeProcesses:
+    """Node processes started from their console scripts; RSS sampled in the background; stopped with SIGINT."""
+
+    def __init__(self, scripts: list[str], args: list[str], log_dir: str | Path, sample_s: float = 0.5) -> None:
+        self.scripts = scripts
+        log_dir = Path(log_dir)
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.logs = [log_dir / f"{s}-{os.getpid()}-{time.monotonic_ns()}.log" for s in scripts]
+        self.procs = [subprocess.Popen([console_script(s), *args], stdout=open(log, "w"), stderr=subprocess.STDOUT)
+                      for s, log in zip(scripts, self.logs)]
+        self.rss: list[tuple[float, list[float | None]]] = []  # (monotonic time, MB per process)
+        self._stop = threading.Event()
+        self._sampler = threading.Thread(target=self._sample, args=(sample_s,), daemon=True)
+        self._sampler.start()
+
+    def _sample(self, period_s: float) -> None:
+        while not self._stop.wait(period_s):
+            self.rss.append((time.monotonic(), [rss_mb(p.pid) for p in self.procs]))
+
+    def log_tail(self, n: int = 2000) -> str:
+        return " | ".join(Path(log).read_text()[-n:] for log in self.logs)
+
+    def stop(self, timeout_s: float = 30.0) -> list[int]:
+        """Ctrl-C every process; their exit codes (a process that ignores it is killed: -9)."""
+        self._stop.set()
+        for p in self.procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        codes = []
+        for p in self.procs:
+            try:
+                codes.append(p.wait(timeout=timeout_s))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+                codes.append(-9)
+        return codes
+
+
+__all__ = ["BagPlayer", "NodeProcesses", "OdometryProbe", "Played", "console_script", "message_class", "rss_mb"]

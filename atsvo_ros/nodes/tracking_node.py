@@ -146,6 +146,7 @@ class TrackingNode(Node):
         # ---- statistics for /diagnostics
         self.rates = RateMeter()
         self.tracking_ms, self.latency_ms, self.stamp_latency_ms = Window(), Window(), Window()
+        self.worker_ms = Window()  # per frame: odometry + keyframe request + publishing (what bounds the rate)
         self.frames_in = self.frames_out = self.bad_snapshots = 0
         self._drops_reported = 0
         self.last: RuntimeOutput | None = None
@@ -248,11 +249,13 @@ class TrackingNode(Node):
 
     # ------------------------------------------------------------------ worker thread
     def _process(self, inp: FrameInput) -> None:
+        start = time.monotonic()
         out = self.runtime.process(inp)
         if out is None:
             return
         self._publish(out)
         done = time.monotonic()
+        self.worker_ms.add((done - start) * 1e3)
         self.frames_out += 1
         self.last = out
         self.rates.add("odometry")
@@ -328,6 +331,7 @@ class TrackingNode(Node):
             "reason": (last.result.reason or "") if last else "",
             "tracking_time_ms_p50": self.tracking_ms.percentile(50), "tracking_time_ms_max":
                 self.tracking_ms.percentile(100),
+            "worker_ms_p50": self.worker_ms.percentile(50), "worker_ms_mean": self.worker_ms.mean(),
             "latency_ms_p50": self.latency_ms.percentile(50), "latency_ms_p99": self.latency_ms.percentile(99),
             "stamp_to_odometry_ms_p50": self.stamp_latency_ms.percentile(50),
             "frames_in": self.frames_in, "frames_out": self.frames_out, "frames_waiting": rt.frames_waiting,

@@ -15,6 +15,9 @@ SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
                "event decoding and time-surface speed vs rosbags and dv-processing"),
     "tracking": ("atsvo_ros.tools.bench_tracking", "add_tracking_args", "main_tracking",
                  "RGB-D tracking time per frame and accuracy on synthetic trot/flying sequences"),
+    "nodes": ("atsvo_ros.tools.bench_nodes", "add_nodes_args", "main_nodes",
+              "ROS nodes over loopback DDS: frame-stamp-to-odometry latency, drops and memory at 1x / 3x the "
+              "sustainable frame rate"),
     "real": ("atsvo_ros.tools.bench_real", "add_real_args", "main_real",
              "our RGB-D odometry vs Open3D's on real TUM RGB-D sequences (ATE, RPE, time, wrong-but-ok frames)"),
 }

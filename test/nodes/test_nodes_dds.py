@@ -13,7 +13,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -32,18 +31,13 @@ from atsvo_ros.config import load_config  # noqa: E402
 from atsvo_ros.core.geometry import so3_log  # noqa: E402
 from atsvo_ros.eval.metrics import EvalOptions, evaluate  # noqa: E402
 from atsvo_ros.io.trajectory import Trajectory, read_tum  # noqa: E402
-from atsvo_ros.nodes.player import BagPlayer, OdometryProbe, Played  # noqa: E402
+from atsvo_ros.nodes.player import BagPlayer, NodeProcesses, OdometryProbe, Played, console_script  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 PARAMS = ROOT / "config" / "synthetic.yaml"
 SIM_ARGS = ["--scenario", "trot", "--duration", "3", "--seed", "0", "--width", "160", "--height", "120",
             "--event-scale", "0.25", "--quiet"]
 START_TIMEOUT_S = 60.0  # node start-up: imports, numba's cache, DDS discovery (a loaded CI machine)
-
-
-def _bin(name: str) -> str:
-    path = Path(sys.executable).parent / name
-    return str(path) if path.exists() else name
 
 
 @pytest.fixture(scope="module")
@@ -55,8 +49,8 @@ def sequence(tmp_path_factory):
     bag = base / "trot"
     assert sim_main([*SIM_ARGS, "--out", str(bag)]) == 0
     out = base / "replay"
-    done = subprocess.run([_bin("atsvo-replay"), str(bag), "--out", str(out), "--preset", "synthetic", "--no-plots",
-                           "--no-progress"], capture_output=True, text=True, timeout=300)
+    done = subprocess.run([console_script("atsvo-replay"), str(bag), "--out", str(out), "--preset", "synthetic",
+                           "--no-plots", "--no-progress"], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     replay = read_tum(out / "trajectory.tum")
     metrics = json.loads((out / "metrics.json").read_text())
@@ -85,9 +79,7 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
     t = cfg.topics
     args = ["--ros-args", "--params-file", str(PARAMS), "-p", f"mapping.synchronous:={str(synchronous).lower()}",
             "-p", f"node.queue_size:={queue_size}", "-p", "node.diagnostics_period_s:=0.25"]
-    logs = [base / f"{s}-{time.monotonic_ns()}.log" for s in scripts]
-    procs = [subprocess.Popen([_bin(s), *args], stdout=open(log, "w"), stderr=subprocess.STDOUT)
-             for s, log in zip(scripts, logs)]
+    procs = NodeProcesses(scripts, args, base / "logs")
     context = Context()
     rclpy.init(context=context)
     executor = None
@@ -99,7 +91,7 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
         executor.add_node(node)
         threading.Thread(target=executor.spin, daemon=True).start()
         assert player.wait_for_subscribers(START_TIMEOUT_S), "the tracking node did not subscribe: " + \
-            " | ".join(Path(log).read_text()[-2000:] for log in logs)
+            procs.log_tail()
         if "tracking_node" in scripts:
             assert probe.wait(lambda: (probe.diag("odometry") or {}).get("mapping") == "connected", START_TIMEOUT_S), \
                 f"tracking_node never saw mapping_node: {probe.diag('odometry')}"
@@ -117,20 +109,12 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
         if check_reset:
             reset_ok = _check_reset(player, probe)
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        codes = []
-        for p in procs:
-            try:
-                codes.append(p.wait(timeout=30))
-            except subprocess.TimeoutExpired:
-                p.kill()
-                codes.append(p.wait())
+        codes = procs.stop()
         if executor is not None:
             executor.shutdown(timeout_sec=2.0)
         rclpy.try_shutdown(context=context)
-    return Run(played, probe, stamps, poses, diag, statuses, reset_ok, codes, [Path(log).read_text() for log in logs])
+    logs = [Path(log).read_text() for log in procs.logs]
+    return Run(played, probe, stamps, poses, diag, statuses, reset_ok, codes, logs)
 
 
 def _check_reset(player: BagPlayer, probe: OdometryProbe) -> bool:
@@ -219,8 +203,8 @@ def test_a_bad_parameter_file_stops_the_node_with_one_line(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("/**:\n  ros__parameters:\n    tracker:\n      max_iterations: 500\n")
     for script in ("atsvo_node", "tracking_node", "mapping_node"):
-        done = subprocess.run([_bin(script), "--ros-args", "--params-file", str(bad)], capture_output=True, text=True,
-                              timeout=120)
+        done = subprocess.run([console_script(script), "--ros-args", "--params-file", str(bad)], capture_output=True,
+                              text=True, timeout=120)
         lines = [ln for ln in (done.stdout + done.stderr).splitlines() if ln.strip()]
         assert done.returncode == 1, (script, done.stdout, done.stderr)
         assert len(lines) == 1 and "tracker.max_iterations = 500" in lines[0] and "[1, 200]" in lines[0], lines
@@ -231,7 +215,7 @@ def test_without_event_messages_the_node_says_so_once_and_runs_rgbd(tmp_path):
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in env.get("PYTHONPATH", "").split(os.pathsep)
                                         if "ros_msgs" not in p)
-    proc = subprocess.Popen([_bin("tracking_node"), "--ros-args", "--params-file", str(PARAMS)], env=env,
+    proc = subprocess.Popen([console_script("tracking_node"), "--ros-args", "--params-file", str(PARAMS)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
     deadline = time.monotonic() + START_TIMEOUT_S
