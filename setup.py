@@ -82,8 +82,10 @@ setup(
     entry_points={
         "console_scripts": [
             "atsvo-info = atsvo_ros.tools.info:main",
-            # ROS 2 executables (`ros2 run atsvo_ros tracking_node`); need rclpy at run time.
+            # ROS 2 executables (`ros2 run atsvo_ros atsvo_node`); need rclpy at run time (the `ros` extra).
+            "atsvo_node = atsvo_ros.nodes.atsvo_node:main",
             "tracking_node = atsvo_ros.nodes.tracking_node:main",
+            "mapping_node = atsvo_ros.nodes.mapping_node:main",
             "atsvo-replay = atsvo_ros.tools.replay:main",
             "atsvo-eval = atsvo_ros.tools.eval:main",
             "atsvo-demo = atsvo_ros.tools.demo:main",

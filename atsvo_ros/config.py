@@ -81,16 +81,31 @@ class RigConfig:
 class TopicsConfig:
     """Topic and frame names (REP 105: the odometry is odom -> base_link)."""
 
-    rgb: str = "/camera/camera/color/image_raw"
-    rgb_info: str = "/camera/camera/color/camera_info"
-    depth: str = "/camera/camera/aligned_depth_to_color/image_raw"
-    events: str = "/dvxplorer/events"
-    event_info: str = "/dvxplorer/camera_info"
-    ground_truth: str = "/ground_truth/pose"
-    imu: str = "/camera/camera/imu"  # sensor_msgs/Imu (realsense2_camera with unite_imu_method set)
-    odometry: str = "/atsvo/odometry"
-    odom_frame: str = "odom"
-    base_frame: str = "base_link"
+    rgb: str = _f("/camera/camera/color/image_raw", doc="colour image (sensor_msgs/Image rgb8/bgr8/mono8, or "
+                  "CompressedImage)")
+    rgb_info: str = _f("/camera/camera/color/camera_info", doc="colour camera_info")
+    depth: str = _f("/camera/camera/aligned_depth_to_color/image_raw",
+                    doc="depth aligned to colour (16UC1 scaled by rig.depth_scale_m, or 32FC1 metres)")
+    events: str = _f("/dvxplorer/events", doc="event messages (type: node.event_msg_type)")
+    event_info: str = _f("/dvxplorer/camera_info", doc="event camera_info")
+    ground_truth: str = _f("/ground_truth/pose", doc="ground-truth pose (offline tools only)")
+    imu: str = _f("/camera/camera/imu", doc="sensor_msgs/Imu (realsense2_camera with unite_imu_method set)")
+    odometry: str = _f("/atsvo/odometry", doc="nav_msgs/Odometry out, one per processed frame")
+    status: str = _f("/atsvo/status", doc="diagnostic_msgs/DiagnosticArray out, one per odometry message with the "
+                     "same stamp: tracking status, mode, reason")
+    map: str = _f("/atsvo/map", doc="sensor_msgs/PointCloud2 out: the local map in the odom frame (latched)")
+    debug_ats: str = _f("/atsvo/debug/ats", doc="sensor_msgs/Image mono8 out: the time surface at each frame "
+                        "(computed only while someone subscribes)")
+    debug_selection: str = _f("/atsvo/debug/selected_pixels", doc="sensor_msgs/Image rgb8 out: the time surface "
+                              "with the selected event pixels in red (only while someone subscribes)")
+    keyframe_requests: str = _f("/atsvo/mapping/keyframe_requests", doc="tracking_node -> mapping_node: keyframe "
+                                "requests (std_msgs/UInt8MultiArray, atsvo wire format)")
+    map_snapshots: str = _f("/atsvo/mapping/snapshots", doc="mapping_node -> tracking_node: map snapshots "
+                            "(std_msgs/UInt8MultiArray, atsvo wire format)")
+    reset_service: str = _f("/atsvo/reset", doc="std_srvs/Trigger: restart the odometry (new map, pose back to "
+                            "the identity at the next frame)")
+    odom_frame: str = _f("odom", doc="frame_id of the odometry and parent of the TF")
+    base_frame: str = _f("base_link", doc="child_frame_id of the odometry and child of the TF")
 
 
 @dataclass(frozen=True)
@@ -270,6 +285,32 @@ class MappingConfig:
                                          "(and the depth-edge test spans it); 1 = the pixel's own depth")
     depth_points: int = _f(800, 0, 100000, doc="geometric points (smooth valid depth, regular grid) per keyframe "
                                                "for the depth term")
+    synchronous: bool = _f(False, doc="ROS nodes: tracking waits for each keyframe it asks mapping for (what "
+                           "atsvo-replay does, so node and replay agree pose for pose); false (default): tracking "
+                           "goes on against the last map snapshot while mapping inserts the keyframe (PTAM)")
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """ROS node behaviour (ignored by the offline tools)."""
+
+    event_msg_type: str = _f("event_camera_msgs/msg/EventPacket",
+                             choices=("event_camera_msgs/msg/EventPacket", "event_array_msgs/msg/EventArray",
+                                      "dvs_msgs/msg/EventArray", "dv_ros2_msgs/msg/EventArray"),
+                             doc="message type on topics.events (libcaer_driver: EventPacket)")
+    queue_size: int = _f(2, 1, 100, doc="frames waiting for the tracker; when full the oldest is dropped (counted) "
+                         "and its events and IMU samples go to the next, so the odometry stays fresh")
+    use_imu: bool = _f(True, doc="feed topics.imu's gyro to the motion prediction")
+    publish_tf: bool = _f(True, doc="broadcast odom -> base_link on /tf")
+    diagnostics_period_s: float = _f(1.0, 0.0, 3600.0, lo_open=True, doc="period of /diagnostics")
+    executor: str = _f("events", choices=("events", "multi_threaded", "single_threaded"),
+                       doc="rclpy executor of the node process: events (rclpy.experimental.EventsExecutor, C++; "
+                           "measured to take every 1 kHz event packet where rclpy's Python executors lost 30-65 %), "
+                           "or rclpy's multi_threaded / single_threaded executors. The odometry and mapping run in "
+                           "their own threads either way")
+    mapping_timeout_s: float = _f(5.0, 0.0, 600.0, lo_open=True,
+                                  doc="tracking_node + mapping_node: a keyframe request unanswered this long is given "
+                                      "up (counted); also the longest a synchronous insert waits")
 
 
 @dataclass(frozen=True)
@@ -286,6 +327,7 @@ class AtsvoConfig:
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
+    node: NodeConfig = field(default_factory=NodeConfig)
     mode: str = _f("fused", choices=("fused", "rgbd"), doc="rgbd = never use events")
 
 
@@ -512,5 +554,5 @@ def resolve_config_path(path: str | Path) -> Path:
 
 
 __all__ = ["AtsConfig", "AtsvoConfig", "CameraConfig", "EventSelectionConfig", "FusionConfig", "MappingConfig",
-           "RgbSelectionConfig", "RigConfig", "TopicsConfig", "TrackerConfig", "config_from_dict",
+           "NodeConfig", "RgbSelectionConfig", "RigConfig", "TopicsConfig", "TrackerConfig", "config_from_dict",
            "flatten", "load_config", "ros_parameters", "unflatten"]

@@ -82,3 +82,7 @@ class TrackingError(AtsvoError):
 
 class SimulationError(AtsvoError):
     """A synthetic sequence could not be generated with the requested settings."""
+
+
+class WireError(AtsvoError):
+    """A message of the atsvo wire format (keyframe requests, map snapshots between processes) is malformed."""

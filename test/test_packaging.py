@@ -34,8 +34,9 @@ def test_every_module_outside_nodes_imports_without_ros():
     blocker = (
         "import sys\n"
         "class _Block:\n"
-        "    BLOCKED = ('rclpy', 'message_filters', 'sensor_msgs', 'nav_msgs', 'geometry_msgs',\n"
-        "               'std_msgs', 'tf2_ros', 'builtin_interfaces', 'event_camera_msgs', 'dvs_msgs')\n"
+        "    BLOCKED = ('rclpy', 'message_filters', 'sensor_msgs', 'nav_msgs', 'geometry_msgs', 'std_msgs',\n"
+        "               'std_srvs', 'diagnostic_msgs', 'rcl_interfaces', 'tf2_ros', 'tf2_msgs',\n"
+        "               'builtin_interfaces', 'event_camera_msgs', 'dvs_msgs')\n"
         "    def find_spec(self, name, path=None, target=None):\n"
         "        if name.split('.')[0] in self.BLOCKED:\n"
         "            raise ImportError(f'{name} blocked: core must not need ROS')\n"
@@ -60,8 +61,8 @@ def test_package_xml_is_format_3_with_runtime_dependencies():
     root = ET.parse(ROOT / "package.xml").getroot()
     assert root.get("format") == "3" and root.findtext("name") == "atsvo_ros"
     deps = {e.text for e in root.findall("exec_depend")}
-    for dep in ("rclpy", "sensor_msgs", "nav_msgs", "geometry_msgs", "std_msgs", "tf2_ros",
-                "message_filters", "python3-numpy", "python3-opencv"):
+    for dep in ("rclpy", "sensor_msgs", "nav_msgs", "geometry_msgs", "std_msgs", "std_srvs", "diagnostic_msgs",
+                "tf2_ros", "tf2_msgs", "event_camera_msgs", "python3-numpy", "python3-opencv"):
         assert dep in deps
     assert "python3-pytest" in {e.text for e in root.findall("test_depend")}
     assert root.find("export/build_type").text == "ament_python"
@@ -73,3 +74,13 @@ def test_setup_cfg_installs_scripts_where_ros2_run_looks():
     assert cfg["develop"]["script_dir"] == "$base/lib/atsvo_ros"
     assert cfg["install"]["install_scripts"] == "$base/lib/atsvo_ros"
     assert (ROOT / "resource" / "atsvo_ros").is_file()
+
+
+def test_ci_runs_the_readme_test_command_with_the_ros_tests_required():
+    """.ci/run: the README's test command verbatim, after .ci/ros_env.sh, with missing ROS pieces made fatal."""
+    readme = (ROOT / "README.md").read_text()
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    command = "pip install -e '.[test]' && python -m pytest -q"
+    assert command in readme and ci[-1] == command
+    assert ci.index("source .ci/ros_env.sh  # pip install -e '.[ros]', builds the messages (cached), exports the "
+                    "DDS settings") < ci.index("export ATSVO_REQUIRE_ROS=1") < len(ci) - 1

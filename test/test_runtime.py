@@ -160,3 +160,158 @@ def test_events_reach_the_core_cut_at_frame_stamps_from_messages_or_raw_bytes(ba
         assert len(ea) == 0 or ea.t_last_ns <= sa  # nothing from after the frame
         total += len(ea)
     assert total > 10_000
+
+
+class _ImuRecording:
+    """A core double that records which IMU samples it had when each frame came (and answers with the identity)."""
+
+    supports_events = False
+
+    def __init__(self, config, rgb_camera, event_camera=None):
+        from atsvo_ros.core.imu import ImuBatch
+
+        self.imu = ImuBatch.empty()
+        self.seen: list[tuple[int, list[int]]] = []
+        self.closed = False
+
+    def add_imu(self, batch):
+        from atsvo_ros.core.imu import ImuBatch
+
+        self.imu = ImuBatch.concatenate([self.imu, batch])
+
+    def add_events(self, batch):
+        pass
+
+    def process_frame(self, frame):
+        from atsvo_ros.core.frame import OdometryResult, TrackingStatus
+
+        self.seen.append((int(frame.stamp_ns), self.imu.stamps_ns.tolist()))
+        return OdometryResult(frame.stamp_ns, np.eye(4), np.eye(4), np.eye(6), TrackingStatus.OK, "rgbd", 0.0, 0, 0,
+                              False)
+
+    def close(self):
+        self.closed = True
+
+
+def _rgbd_and_imu(bag):
+    cfg = load_config("synthetic", overrides={"mode": "rgbd"})
+    msgs = [(t, m) for t, _, m in _messages(bag) if t in (cfg.topics.rgb, cfg.topics.depth, cfg.topics.imu,
+                                                          cfg.topics.rgb_info)]
+    return cfg, msgs
+
+
+def _feed(rt, cfg, items):
+    outs = []
+    for item in items:
+        outs += _poll_one(rt, cfg, item)
+    return outs + rt.flush()
+
+
+def test_each_frame_gets_the_imu_samples_up_to_its_stamp_whatever_the_arrival_order(bag):
+    """The gyro prediction must not depend on transport timing: samples after a frame wait for the next one."""
+    from atsvo_ros.io.images import stamp_ns
+
+    cfg, msgs = _rgbd_and_imu(bag)
+    runs = []
+    # recorded order; IMU delivered 30 ms early; 20 ms late (frames wait for it); held back until just before
+    # each frame's depth image
+    imu = [m for m in msgs if m[0] == cfg.topics.imu]
+    other = [m for m in msgs if m[0] != cfg.topics.imu]
+    early = sorted(msgs, key=lambda m: stamp_ns(m[1]) - (30_000_000 if m[0] == cfg.topics.imu else 0))
+    late = sorted(msgs, key=lambda m: stamp_ns(m[1]) + (20_000_000 if m[0] == cfg.topics.imu else 0))
+    held = []
+    for m in other:
+        if m[0] == cfg.topics.depth:
+            held += [i for i in imu if stamp_ns(i[1]) <= stamp_ns(m[1])]
+            imu = [i for i in imu if stamp_ns(i[1]) > stamp_ns(m[1])]
+        held.append(m)
+    for order in (msgs, early, late, held):
+        rt = OdometryRuntime(cfg, core_factory=_ImuRecording)
+        assert len(_feed(rt, cfg, order)) >= 15
+        runs.append(rt.core.seen)
+        assert rt.counters["imu_late"] == 0
+    assert runs[0] == runs[1] == runs[2] == runs[3]
+    assert all(max(samples) <= stamp for stamp, samples in runs[0] if samples)  # nothing from after the frame
+    assert all(samples for _, samples in runs[0][1:])  # the first frame precedes the first sample
+
+
+def test_late_imu_samples_are_dropped_and_counted(bag):
+    cfg, msgs = _rgbd_and_imu(bag)
+    imu = [m for m in msgs if m[0] == cfg.topics.imu]
+    other = [m for m in msgs if m[0] != cfg.topics.imu]
+    rt = OdometryRuntime(cfg, core_factory=_ImuRecording)
+    outs = _feed(rt, cfg, other + imu)  # every IMU sample after every frame
+    assert len(outs) >= 15 and rt.counters["imu_late"] > 0
+    assert all(not s for _, s in rt.core.seen[:-1])
+
+
+def test_frames_before_the_camera_info_are_held_not_lost(bag):
+    """The first frame defines the odom origin: a camera_info that arrives late must not drop it."""
+    cfg, msgs = _rgbd_and_imu(bag)
+    info = next(m for t, m in msgs if t == cfg.topics.rgb_info)
+    images = [(t, m) for t, m in msgs if t in (cfg.topics.rgb, cfg.topics.depth)]
+    rt = OdometryRuntime(cfg, core_factory=_ImuRecording)
+    assert _feed(rt, cfg, images[:8]) == [] and rt.counters["frames_waiting_camera_info"] == 4
+    rt.on_rgb_camera_info(info)
+    outs = _feed(rt, cfg, images[8:])
+    from atsvo_ros.io.images import stamp_ns
+
+    assert [o.result.stamp_ns for o in outs] == sorted({stamp_ns(m) for t, m in images if t == cfg.topics.rgb})
+
+
+def test_reset_starts_a_new_core(bag):
+    cfg, msgs = _rgbd_and_imu(bag)
+    rt = OdometryRuntime(cfg, core_factory=_ImuRecording)
+    outs = _feed(rt, cfg, msgs[: len(msgs) // 2])
+    first = rt.core
+    rt.reset()
+    assert first.closed and rt.core is None and rt.counters["resets"] == 1
+    later = _feed(rt, cfg, msgs[len(msgs) // 2:])
+    assert outs and later and rt.core is not first and later[0].twist is None  # no twist across the reset
+
+
+def test_event_messages_wait_for_the_event_camera_info(bag):
+    """Raw event packets that come before the event camera_info are decoded once it is there, none lost."""
+    cfg = load_config("synthetic")
+    items = list(_messages(bag, raw_events=True))
+    ev = [(t, mt, m) for t, mt, m in items if t == cfg.topics.events]
+    info = next(m for t, _, m in items if t == cfg.topics.event_info)
+    fusing = type("Fusing", (_ImuRecording,), {"supports_events": True})
+    rt = OdometryRuntime(cfg, core_factory=fusing, use_events=True)
+    for t, mt, m in ev[:50]:
+        rt.add_event_msg(m, mt, t)
+    assert rt.counters["event_msgs"] == 0  # held
+    rt.on_event_camera_info(info)
+    assert rt.counters["event_msgs"] == 50
+    assert rt.decoder_stats[cfg.topics.events]["width"] == info.width
+    assert rt.decoder_stats[cfg.topics.events]["dropped_out_of_range"] == 0
+
+
+def test_a_silent_imu_does_not_hold_frames_back(bag):
+    """The IMU stops half way: frames wait at most IMU_STALL_NS of stream time for it, then go without."""
+    from atsvo_ros.io.images import stamp_ns
+
+    cfg, msgs = _rgbd_and_imu(bag)
+    t_mid = stamp_ns(msgs[len(msgs) // 2][1])
+    cut = [m for m in msgs if m[0] != cfg.topics.imu or stamp_ns(m[1]) < t_mid]
+    rt = OdometryRuntime(cfg, core_factory=_ImuRecording)
+    outs = []
+    for item in cut:
+        outs += _poll_one(rt, cfg, item)
+    n_frames = sum(1 for t, _ in msgs if t == cfg.topics.rgb)
+    # every frame but the last few (within the stall window of the last image) is out before the flush
+    assert len(outs) >= n_frames - 1 - OdometryRuntime.IMU_STALL_NS // 33_000_000
+    assert len(outs) + len(rt.flush()) == n_frames
+
+
+def _poll_one(rt, cfg, item):
+    topic, msg = item
+    if topic == cfg.topics.rgb_info:
+        rt.on_rgb_camera_info(msg)
+    elif topic == cfg.topics.rgb:
+        rt.add_rgb_msg(msg)
+    elif topic == cfg.topics.depth:
+        rt.add_depth_msg(msg)
+    else:
+        rt.add_imu_msg(msg)
+    return rt.poll()

@@ -108,6 +108,26 @@ def pose_from_transform_msg(msg: Any) -> np.ndarray:
     return pose_from_tq(np.array([t.x, t.y, t.z]), np.array([q.x, q.y, q.z, q.w]))
 
 
+#: Fields of the published map (sensor_msgs/PointCloud2): name, byte offset, datatype (7 = FLOAT32), count.
+MAP_CLOUD_FIELDS = (("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("intensity", 12, 7, 1))
+MAP_CLOUD_POINT_STEP = 16
+
+
+def map_cloud_data(points_w: np.ndarray, intensity: np.ndarray, T_odom_world: np.ndarray) -> np.ndarray:
+    """The map as PointCloud2 data: (N, 4) little-endian float32 rows x y z intensity, positions in odom.
+
+    ``intensity`` is each point's brightness-normalised intensity in its host keyframe (0-255 scale), so
+    RViz / Foxglove can colour the cloud like the scene.
+    """
+    from atsvo_ros.core.geometry import transform_points
+
+    p = np.asarray(points_w, dtype=np.float64).reshape(-1, 3)
+    out = np.empty((len(p), 4), dtype="<f4")
+    out[:, :3] = transform_points(np.asarray(T_odom_world, dtype=np.float64), p) if len(p) else p
+    out[:, 3] = np.asarray(intensity, dtype=np.float64).reshape(-1)
+    return out
+
+
 def _cov36(cov: np.ndarray) -> np.ndarray:
     c = np.asarray(cov, dtype=np.float64).reshape(6, 6)
     if not np.all(np.isfinite(c)):

@@ -137,6 +137,16 @@ class FrameAssembler:
         return out
 
     @property
+    def n_pairs(self) -> int:
+        """Paired frames waiting for the event stream to pass them."""
+        return len(self._pairs)
+
+    @property
+    def newest_ns(self) -> int | None:
+        """The newest stamp seen on any stream (images, event marks); None before the first."""
+        return None if self._newest_ns == -(2**63) else self._newest_ns
+
+    @property
     def pending(self) -> int:
         """Images and pairs held back (bounded)."""
         return len(self._rgb) + len(self._depth) + len(self._pairs)

@@ -1,17 +1,25 @@
-"""ROS 2 tracking node: synchronized RGB + aligned depth + events in, nav_msgs/Odometry and TF out.
+"""ROS 2 tracking node: colour + aligned depth + camera_info + events (+ IMU) in, odometry, status and TF out.
 
-All logic lives in :class:`atsvo_ros.pipeline.TrackingPipeline` (ROS-free, tested with rosbags
-messages); this node only declares parameters, wires subscriptions and publishes what the
-pipeline hands back. Errors in a callback are logged and counted; the node keeps running.
+The callbacks only ingest (image conversion, event decoding, pairing by the package's own
+:class:`~atsvo_ros.runtime.OdometryRuntime`, which also cuts the event and IMU streams at frame
+stamps) and put each complete frame into a bounded drop-oldest queue; a worker thread runs the
+odometry and publishes. Mapping runs either in this process (``atsvo_node``: a mapping thread, the
+snapshot shared in memory) or in ``mapping_node`` (keyframe requests and snapshots over topics, in the
+wire format of :mod:`atsvo_ros.io.wire`). ``mapping.synchronous`` makes tracking wait for each keyframe,
+as ``atsvo-replay`` does.
+
+    ros2 run atsvo_ros tracking_node --ros-args --params-file config/mini_cheetah.yaml   # + mapping_node
 """
 from __future__ import annotations
 
-import importlib
+import time
+import traceback
+from collections.abc import Callable
 from typing import Any
 
-import message_filters
-import rclpy
+import numpy as np
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import (
     Point,
     Pose,
@@ -23,106 +31,356 @@ from geometry_msgs.msg import (
     TwistWithCovariance,
     Vector3,
 )
-from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
+from nav_msgs.msg import Odometry as OdometryMsg
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
-from tf2_ros import TransformBroadcaster
+from sensor_msgs.msg import CameraInfo, Image, Imu
+from std_msgs.msg import Header, UInt8MultiArray
+from std_srvs.srv import Trigger
 
-from atsvo_ros.config import AtsvoConfig, config_from_dict, flatten
-from atsvo_ros.errors import AtsvoError
+from atsvo_ros.core.map import MapSnapshot
+from atsvo_ros.errors import WireError
+from atsvo_ros.frame_queue import DropOldestQueue, Worker
 from atsvo_ros.io.ros_out import MsgClasses, odometry_msg, transform_msg
-from atsvo_ros.runtime import OdometryRuntime
+from atsvo_ros.io.wire import uint8_multiarray_cdr, uint8_multiarray_payload
+from atsvo_ros.mapping_remote import RemoteMapping, mapping_digest
+from atsvo_ros.nodes._params import declare_config
+from atsvo_ros.nodes._ros import (
+    ERROR,
+    LATCHED_QOS,
+    OK,
+    OUTPUT_QOS,
+    REQUEST_QOS,
+    SENSOR_QOS,
+    STREAM_QOS,
+    TF_QOS,
+    WARN,
+    RateMeter,
+    Window,
+    diagnostic_array,
+    event_message_class,
+    run_nodes,
+    stamp_msg,
+    uint8_array,
+)
+from atsvo_ros.runtime import FrameInput, OdometryRuntime, RuntimeOutput
 
-_CLASSES = MsgClasses(Time, Header, Odometry, PoseWithCovariance, Pose, Point, Quaternion, TwistWithCovariance,
+_CLASSES = MsgClasses(Time, Header, OdometryMsg, PoseWithCovariance, Pose, Point, Quaternion, TwistWithCovariance,
                       Twist, Vector3, TransformStamped, Transform)
 
-
-def _msg_class(msgtype: str) -> Any:
-    """``pkg/msg/Name`` -> the rclpy message class (e.g. event_camera_msgs/msg/EventPacket)."""
-    pkg, _, name = msgtype.split("/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+#: status -> diagnostic level of the per-frame status message (see the README)
+STATUS_LEVEL = {"ok": OK, "initialising": WARN, "degraded": WARN, "relocalised": WARN, "reinitialised": WARN,
+                "lost": ERROR}
 
 
 class TrackingNode(Node):
-    """Runs the odometry pipeline on live topics."""
+    """Tracking (see the module docstring).
 
-    def __init__(self) -> None:
-        super().__init__("atsvo_tracking")
-        dyn = ParameterDescriptor(dynamic_typing=True)
-        defaults = flatten(AtsvoConfig())
-        for key, value in defaults.items():
-            self.declare_parameter(key, value, dyn)
-        self.declare_parameter("event_msg_type", "event_camera_msgs/msg/EventPacket")
-        self.declare_parameter("publish_tf", True)
-        params = {k: self.get_parameter(k).value for k in defaults}
-        self.config = config_from_dict(params)
-        self.event_msgtype = str(self.get_parameter("event_msg_type").value)
-        self.publish_tf = bool(self.get_parameter("publish_tf").value)
-        topics = self.config.topics
+    ``mapping="topics"`` talks to a ``mapping_node`` over topics; ``mapping="memory"`` runs the mapper in a
+    thread of this process and calls ``on_snapshot`` (from that thread) with every new snapshot.
+    """
 
-        self.pipeline = OdometryRuntime(self.config, logger=self._log)
-        self.odom_pub = self.create_publisher(Odometry, topics.odometry, 10)
-        self.tf_broadcaster = TransformBroadcaster(self) if self.publish_tf else None
+    def __init__(self, *, mapping: str = "topics", on_snapshot: Callable[[MapSnapshot], None] | None = None,
+                 name: str = "atsvo_tracking") -> None:
+        super().__init__(name)
+        self.config = cfg = declare_config(self)
+        topics, nc = cfg.topics, cfg.node
+        log = self.get_logger()
+        self.fatal_error: BaseException | None = None
+        self._mapping_mode = mapping
+        self._on_snapshot = on_snapshot
+        self._port: RemoteMapping | None = None
 
-        qos = qos_profile_sensor_data
-        self.create_subscription(CameraInfo, topics.rgb_info, self.pipeline.on_rgb_camera_info, qos)
-        self.create_subscription(CameraInfo, topics.event_info, self.pipeline.on_event_camera_info, qos)
-        if self.config.mode == "fused":
-            # raw=True: the callback gets the CDR bytes, decoded with numpy (no object per event).
-            self.create_subscription(_msg_class(self.event_msgtype), topics.events, self._on_events, qos, raw=True)
-        rgb_sub = message_filters.Subscriber(self, Image, topics.rgb, qos_profile=qos)
-        depth_sub = message_filters.Subscriber(self, Image, topics.depth, qos_profile=qos)
-        self.sync = message_filters.ApproximateTimeSynchronizer(
-            [rgb_sub, depth_sub], queue_size=10, slop=self.config.rig.sync_tolerance_s)
-        self.sync.registerCallback(self._on_rgbd)
-        self.create_timer(10.0, self._report)
-        self.get_logger().info(f"atsvo tracking: mode={self.config.mode}, rgb={topics.rgb}, depth={topics.depth}, "
-                               f"events={topics.events} ({self.event_msgtype}), odometry={topics.odometry}")
+        # ---- events: the message package may be missing (pip route without the built messages)
+        self.event_class = None
+        use_events = cfg.mode == "fused"
+        if use_events:
+            self.event_class, why = event_message_class(nc.event_msg_type)
+            if self.event_class is None:
+                log.warn(f"events off: {why}; running RGB-D only")
+                use_events = False
 
-    def _log(self, level: str, text: str) -> None:
-        getattr(self.get_logger(), level)(text)
+        def make_core(config, rgb_camera, event_camera=None):
+            from atsvo_ros.core.odometry import Odometry
 
-    def _on_events(self, msg: bytes) -> None:
-        self.pipeline.add_event_msg(msg, self.event_msgtype, self.config.topics.events)
+            return Odometry(config, rgb_camera, event_camera, mapping=self._make_mapping_port)
 
-    def _on_rgbd(self, rgb: Image, depth: Image) -> None:
-        self.pipeline.add_rgb_msg(rgb, self.config.topics.rgb)
-        self.pipeline.add_depth_msg(depth, self.config.topics.depth)
-        for out in self.pipeline.poll():
-            self._publish(out)
+        make_core.supports_events = True
+        self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=make_core)
+        self.queue: DropOldestQueue[FrameInput] = DropOldestQueue(nc.queue_size, merge=lambda old, new: new.after(old))
+        self.worker: Worker[FrameInput] = Worker(self.queue, self._process, "atsvo-tracking", self._worker_failed)
 
-    def _publish(self, out) -> None:
-        topics = self.config.topics
-        self.odom_pub.publish(odometry_msg(_CLASSES, out.result.stamp_ns, out.result.T_odom_base,
-                                           out.result.covariance, out.twist, topics.odom_frame, topics.base_frame))
-        if self.tf_broadcaster is not None:
-            self.tf_broadcaster.sendTransform(transform_msg(_CLASSES, out.result.stamp_ns, out.result.T_odom_base,
-                                                            topics.odom_frame, topics.base_frame))
+        # ---- outputs
+        self.odom_pub = self.create_publisher(OdometryMsg, topics.odometry, OUTPUT_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, topics.status, OUTPUT_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", OUTPUT_QOS)
+        self.debug_ats_pub = self.create_publisher(Image, topics.debug_ats, SENSOR_QOS)
+        self.debug_sel_pub = self.create_publisher(Image, topics.debug_selection, SENSOR_QOS)
+        self._tf_send, self.tf_route = self._tf_publisher() if nc.publish_tf else (None, "off (node.publish_tf)")
 
-    def _report(self) -> None:
-        self.get_logger().info("atsvo stats: " + ", ".join(f"{k}={v}" for k, v in self.pipeline.counters.items()))
+        # ---- inputs: one callback at a time (pairing state), never blocked by the worker
+        sensors = MutuallyExclusiveCallbackGroup()
+        self._control_group = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Image, topics.rgb, self._on_rgb, SENSOR_QOS, callback_group=sensors)
+        self.create_subscription(Image, topics.depth, self._on_depth, SENSOR_QOS, callback_group=sensors)
+        self.create_subscription(CameraInfo, topics.rgb_info, self._on_rgb_info, SENSOR_QOS, callback_group=sensors)
+        if use_events:
+            self.create_subscription(CameraInfo, topics.event_info, self._on_event_info, SENSOR_QOS,
+                                     callback_group=sensors)
+            # raw=True: the callback gets the CDR bytes, decoded with numpy (no Python object per event)
+            self.create_subscription(self.event_class, topics.events, self._on_events, STREAM_QOS, raw=True,
+                                     callback_group=sensors)
+        if nc.use_imu:
+            self.create_subscription(Imu, topics.imu, self._on_imu, STREAM_QOS, callback_group=sensors)
+        self.create_service(Trigger, topics.reset_service, self._on_reset, callback_group=self._control_group)
+
+        # ---- mapping over topics
+        self.request_pub = None
+        if mapping == "topics":
+            self.request_pub = self.create_publisher(UInt8MultiArray, topics.keyframe_requests, REQUEST_QOS)
+            self.create_subscription(UInt8MultiArray, topics.map_snapshots, self._on_snapshot_msg, LATCHED_QOS,
+                                     raw=True, callback_group=MutuallyExclusiveCallbackGroup())
+        elif mapping != "memory":
+            raise ValueError(f"mapping must be 'topics' or 'memory', got {mapping!r}")
+
+        # ---- statistics for /diagnostics
+        self.rates = RateMeter()
+        self.tracking_ms, self.latency_ms, self.stamp_latency_ms = Window(), Window(), Window()
+        self.worker_ms = Window()  # per frame: odometry + keyframe request + publishing (what bounds the rate)
+        self.frames_in = self.frames_out = self.bad_snapshots = 0
+        self._drops_reported = 0
+        self.last: RuntimeOutput | None = None
+        self.create_timer(nc.diagnostics_period_s, self._publish_diagnostics, callback_group=self._control_group)
+        self.worker.start()
+        log.info(f"tracking: mode {cfg.mode if use_events or cfg.mode == 'rgbd' else 'rgbd (no event messages)'}, "
+                 f"mapping {'in this process' if mapping == 'memory' else 'in mapping_node (topics)'}"
+                 f"{', synchronous' if cfg.mapping.synchronous else ''}; in: {topics.rgb}, {topics.depth}"
+                 f"{', ' + topics.events + ' (' + nc.event_msg_type + ')' if use_events else ''}"
+                 f"{', ' + topics.imu if nc.use_imu else ''}; out: {topics.odometry}, {topics.status}, "
+                 f"TF {self.tf_route}; queue {nc.queue_size} (drop oldest)")
+
+    # ------------------------------------------------------------------ setup helpers
+    def _tf_publisher(self) -> tuple[Callable[[Any], None] | None, str]:
+        try:
+            from tf2_ros import TransformBroadcaster
+        except ImportError:
+            pass
+        else:
+            br = TransformBroadcaster(self)
+            return br.sendTransform, "odom -> base_link via tf2_ros"
+        try:
+            from tf2_msgs.msg import TFMessage
+        except ImportError:
+            self.get_logger().warn("no TF: neither tf2_ros nor tf2_msgs is installed; odometry messages only")
+            return None, "off (no tf2_ros / tf2_msgs)"
+        self.get_logger().info("tf2_ros is not installed: odom -> base_link goes to /tf with a plain tf2_msgs "
+                               "publisher")
+        pub = self.create_publisher(TFMessage, "/tf", TF_QOS)
+        return (lambda t: pub.publish(TFMessage(transforms=[t]))), "odom -> base_link on /tf (tf2_msgs publisher)"
+
+    def _make_mapping_port(self, mapper: Any) -> Any:
+        cfg = self.config
+        if self._mapping_mode == "memory":
+            from atsvo_ros.core.mapping_port import ThreadedMapping
+
+            return ThreadedMapping(mapper, synchronous=cfg.mapping.synchronous, on_snapshot=self._on_snapshot)
+        self._port = RemoteMapping(mapper, self._send_request, self._mapping_connected,
+                                   synchronous=cfg.mapping.synchronous, timeout_s=cfg.node.mapping_timeout_s,
+                                   config_digest=mapping_digest(cfg), logger=self._runtime_log)
+        return self._port
+
+    def _runtime_log(self, level: str, text: str) -> None:
+        getattr(self.get_logger(), "warn" if level == "warn" else level)(text)
+
+    # ------------------------------------------------------------------ ingest (executor thread)
+    def _on_rgb_info(self, msg: CameraInfo) -> None:
+        self.runtime.on_rgb_camera_info(msg)
+        self._pump()
+
+    def _on_event_info(self, msg: CameraInfo) -> None:
+        self.runtime.on_event_camera_info(msg)
+        self._pump()
+
+    def _on_rgb(self, msg: Image) -> None:
+        self.rates.add("rgb")
+        self.runtime.add_rgb_msg(msg, self.config.topics.rgb)
+        self._pump()
+
+    def _on_depth(self, msg: Image) -> None:
+        self.rates.add("depth")
+        self.runtime.add_depth_msg(msg, self.config.topics.depth)
+        self._pump()
+
+    def _on_events(self, raw: bytes) -> None:
+        self.rates.add("event_msgs")
+        before = self.runtime.counters["events"]
+        self.runtime.add_event_msg(raw, self.config.node.event_msg_type, self.config.topics.events)
+        self.rates.add("events", self.runtime.counters["events"] - before)
+        self._pump()
+
+    def _on_imu(self, msg: Imu) -> None:
+        self.rates.add("imu")
+        self.runtime.add_imu_msg(msg, self.config.topics.imu)
+        self._pump()
+
+    def _pump(self) -> None:
+        for inp in self.runtime.pop_ready():
+            self.frames_in += 1
+            self.queue.put(inp)
+
+    # ------------------------------------------------------------------ mapping over topics
+    def _send_request(self, blob: bytes) -> None:
+        self.request_pub.publish(uint8_multiarray_cdr(blob))
+
+    def _mapping_connected(self) -> bool:
+        return (self.request_pub is not None and self.request_pub.get_subscription_count() > 0
+                and self.count_publishers(self.config.topics.map_snapshots) > 0)
+
+    def _on_snapshot_msg(self, raw: bytes) -> None:
+        port = self._port
+        if port is None:
+            return
+        try:
+            port.on_message(uint8_multiarray_payload(raw))
+        except WireError as exc:
+            self.bad_snapshots += 1
+            self.get_logger().error(f"{self.config.topics.map_snapshots}: snapshot skipped: {exc}",
+                                    throttle_duration_sec=10.0)
+
+    # ------------------------------------------------------------------ worker thread
+    def _process(self, inp: FrameInput) -> None:
+        start = time.monotonic()
+        out = self.runtime.process(inp)
+        if out is None:
+            return
+        self._publish(out)
+        done = time.monotonic()
+        self.worker_ms.add((done - start) * 1e3)
+        self.frames_out += 1
+        self.last = out
+        self.rates.add("odometry")
+        self.tracking_ms.add(out.result.tracking_time_s * 1e3)
+        self.latency_ms.add((done - inp.ready_s) * 1e3)
+        self.stamp_latency_ms.add((self.get_clock().now().nanoseconds - out.result.stamp_ns) * 1e-6)
+        if self.debug_ats_pub.get_subscription_count() or self.debug_sel_pub.get_subscription_count():
+            self._publish_debug(out.result.stamp_ns)
+
+    def _publish(self, out: RuntimeOutput) -> None:
+        r, topics = out.result, self.config.topics
+        self.odom_pub.publish(odometry_msg(_CLASSES, r.stamp_ns, r.T_odom_base, r.covariance, out.twist,
+                                           topics.odom_frame, topics.base_frame))
+        status = getattr(r.status, "value", str(r.status))
+        values = {"mode": r.mode, "reason": r.reason or "", "tracking_time_ms": r.tracking_time_s * 1e3,
+                  "map_points": r.n_points, "inliers": r.n_inliers, "keyframe": r.keyframe_inserted,
+                  **{f"inliers_{k}": v for k, v in r.inliers.items()}}
+        self.status_pub.publish(diagnostic_array(self, [("atsvo: odometry status", STATUS_LEVEL.get(status, WARN),
+                                                         status, values)], stamp=stamp_msg(r.stamp_ns)))
+        if self._tf_send is not None:
+            self._tf_send(transform_msg(_CLASSES, r.stamp_ns, r.T_odom_base, topics.odom_frame, topics.base_frame))
+
+    def _publish_debug(self, stamp_ns: int) -> None:
+        events = getattr(self.runtime.core, "events", None)
+        if events is None:
+            return
+        frame = events.render(stamp_ns)
+        grey = np.clip(frame.surface, 0, 255).astype(np.uint8)
+        header = Header(stamp=stamp_msg(stamp_ns), frame_id="atsvo_event_camera_rectified")
+        h, w = grey.shape
+        if self.debug_ats_pub.get_subscription_count():
+            self.debug_ats_pub.publish(Image(header=header, height=h, width=w, encoding="mono8", step=w,
+                                             data=uint8_array(grey)))
+        if self.debug_sel_pub.get_subscription_count():
+            sel = events.select(frame).selected
+            rgb = np.repeat(grey[..., None], 3, axis=2)
+            if len(sel):
+                rgb[sel[:, 1], sel[:, 0]] = (255, 0, 0)
+            self.debug_sel_pub.publish(Image(header=header, height=h, width=w, encoding="rgb8", step=3 * w,
+                                             data=uint8_array(rgb)))
+
+    def _worker_failed(self, exc: BaseException) -> None:
+        self.get_logger().fatal("tracking worker failed (a bug): "
+                                + "".join(traceback.format_exception(exc)).rstrip())
+        self.fatal_error = exc
+
+    # ------------------------------------------------------------------ services and diagnostics
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        # The worker resets between two frames; the callback does not wait (inputs keep flowing meanwhile).
+        self.worker.call(self.runtime.reset)
+        response.success = self.worker.alive
+        response.message = ("odometry reset: the next frame starts a new map at the identity pose"
+                            if response.success else "reset impossible: the tracking worker has stopped")
+        self.get_logger().info(response.message)
+        return response
+
+    def diagnostics_values(self) -> dict[str, Any]:
+        """What /diagnostics reports (also used by tests and the benchmark)."""
+        rt = self.runtime
+        rates = self.rates.rates()
+        dec = rt.decoder_stats
+        sync = rt.assembler.stats
+        last = self.last
+        port = self._port
+        if self._mapping_mode == "memory":
+            mapping = "in process"
+        elif port is None:
+            mapping = "connected" if self._mapping_connected() else "waiting for mapping_node"
+        else:
+            mapping = "connected" if self._mapping_connected() else "mapping_node not found"
+        values: dict[str, Any] = {
+            "mode": last.result.mode if last else "-", "status": last.result.status.value if last else "-",
+            "reason": (last.result.reason or "") if last else "",
+            "tracking_time_ms_p50": self.tracking_ms.percentile(50), "tracking_time_ms_max":
+                self.tracking_ms.percentile(100),
+            "worker_ms_p50": self.worker_ms.percentile(50), "worker_ms_mean": self.worker_ms.mean(),
+            "latency_ms_p50": self.latency_ms.percentile(50), "latency_ms_p99": self.latency_ms.percentile(99),
+            "stamp_to_odometry_ms_p50": self.stamp_latency_ms.percentile(50),
+            "frames_in": self.frames_in, "frames_out": self.frames_out, "frames_waiting": rt.frames_waiting,
+            "queue_drops": self.queue.n_dropped,
+            "queue_length": len(self.queue), "queue_size": self.queue.maxsize,
+            "decoder_drops": sum(s["dropped_messages"] + s["dropped_out_of_range"] + s["dropped_backwards"]
+                                 for s in dec.values()),
+            "sync_dropped_rgb": sync.dropped_rgb, "sync_dropped_depth": sync.dropped_depth,
+            "frames_without_events": sync.released_without_events,
+            "bad_snapshots": self.bad_snapshots,
+            "keyframes": getattr(rt.core, "n_keyframes", 0) if rt.core is not None else 0,
+            "mapping": mapping, "tf": self.tf_route, "worker": "running" if self.worker.alive else "stopped",
+            **{f"rate_{k}_hz": v for k, v in rates.items()},
+            **{f"count_{k}": v for k, v in sorted(rt.counters.items())},
+        }
+        if port is not None:
+            values.update({f"mapping_{k}": v for k, v in port.stats.items()})
+            if port.last_round_trip_s is not None:
+                values["mapping_round_trip_ms"] = port.last_round_trip_s * 1e3
+        return values
+
+    def _publish_diagnostics(self) -> None:
+        v = self.diagnostics_values()
+        status = v["status"]
+        level = OK
+        new_drops, self._drops_reported = v["queue_drops"] - self._drops_reported, v["queue_drops"]
+        if status in ("-", "initialising", "degraded", "relocalised", "reinitialised") or new_drops > 0:
+            level = WARN
+        if status == "lost" or not self.worker.alive or v["mapping"] == "mapping_node not found":
+            level = ERROR
+        message = status if status != "-" else "waiting for frames"
+        if v["reason"]:
+            message += f": {v['reason']}"
+        self.diag_pub.publish(diagnostic_array(self, [(f"{self.get_name()}: odometry", level, message, v)]))
+
+    def close(self) -> None:
+        """Stop the worker (the frame in progress finishes) and the mapping thread."""
+        self.worker.stop()
+        if self._port is not None:
+            self._port.close()
+        close = getattr(self.runtime.core, "close", None)
+        if close is not None:
+            close()
 
 
-def main(args: list[str] | None = None) -> None:
-    """Entry point of ``ros2 run atsvo_ros tracking_node``."""
-    rclpy.init(args=args)
-    try:
-        node = TrackingNode()
-    except AtsvoError as exc:
-        rclpy.logging.get_logger("atsvo_tracking").fatal(f"bad configuration: {exc}")
-        rclpy.try_shutdown()
-        raise SystemExit(1) from None
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+def main(args: list[str] | None = None) -> int:
+    """``ros2 run atsvo_ros tracking_node`` (with ``mapping_node``; ``atsvo_node`` runs both in one process)."""
+    return run_nodes("tracking_node", lambda: [TrackingNode(mapping="topics")], args)
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -1,5 +1,8 @@
 """DDS hygiene for the node tests: discovery on loopback only, a private domain id per session.
 
+With ``ATSVO_REQUIRE_ROS=1`` (set by .ci/run) a missing rclpy or message package is an error, not a
+skip: CI must run these tests.
+
 Fast DDS's default discovery (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET) multicasts to 239.255.0.1 out of
 every interface; LOCALHOST keeps all traffic on this machine. A random domain id keeps concurrent
 runs on one machine (other worktrees, CI) from seeing each other's topics. Values set by the caller
@@ -11,6 +14,11 @@ import os
 import random
 
 import pytest
+
+if os.environ.get("ATSVO_REQUIRE_ROS") == "1":
+    import event_camera_msgs.msg  # noqa: F401  (.ci/build_ros_msgs.sh)
+    import rclpy  # noqa: F401  (the `ros` extra)
+    import tf2_msgs.msg  # noqa: F401
 
 
 @pytest.fixture(autouse=True, scope="session")

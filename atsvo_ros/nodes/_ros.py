@@ -1,0 +1,190 @@
+"""What the nodes share: QoS profiles, message helpers, diagnostics, and the process entry point.
+
+QoS (documented in the README): sensor inputs use ROS's sensor-data profile (best effort, keep
+last 5; events and IMU keep the last 200), which matches both best-effort and reliable publishers
+(realsense2_camera and ``ros2 bag play`` publish reliable); camera-sized images between processes
+need the Fast DDS profile ``config/fastdds_shm.xml`` (16 MiB shared memory) in *both* processes, or
+a best-effort reader loses most frames. Outputs (odometry, status) are reliable keep-last 10, the
+map and the mapping snapshots reliable + transient local (a late subscriber gets the latest),
+keyframe requests reliable keep-last 8.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+from atsvo_ros.errors import AtsvoError
+
+SENSOR_QOS = qos_profile_sensor_data
+#: The same for the fast streams (events ~1 kHz packets, IMU 200-400 Hz): a deeper reader history, so a
+#: callback that waits a few milliseconds for the GIL does not lose packets.
+STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
+OUTPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+REQUEST_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=8, reliability=ReliabilityPolicy.RELIABLE)
+TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+def event_message_class(msgtype: str) -> tuple[Any, str]:
+    """The rclpy class of an event message type, or ``(None, why)`` when its package is not installed."""
+    pkg, _, name = msgtype.partition("/msg/")
+    try:
+        module = importlib.import_module(f"{pkg}.msg")
+    except ImportError:
+        return None, (f"{pkg} is not installed (ROS: apt install ros-jazzy-{pkg.replace('_', '-')}; pip route: "
+                      "source .ci/ros_env.sh)")
+    cls = getattr(module, name, None)
+    if cls is None:
+        return None, f"{pkg} has no message {name}"
+    return cls, ""
+
+
+def stamp_msg(stamp_ns: int) -> Any:
+    """builtin_interfaces/Time from int64 ns."""
+    from builtin_interfaces.msg import Time
+
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return Time(sec=int(sec), nanosec=int(nanosec))
+
+
+def uint8_array(data: bytes | np.ndarray) -> Any:
+    """What an rclpy ``uint8[]`` field takes without a per-byte Python check."""
+    import array
+
+    out = array.array("B")
+    out.frombytes(data.tobytes() if isinstance(data, np.ndarray) else bytes(data))
+    return out
+
+
+def key_values(values: dict[str, Any]) -> list[Any]:
+    """diagnostic_msgs/KeyValue list (numbers with a sensible precision)."""
+    out = []
+    for k, v in values.items():
+        if isinstance(v, float):
+            v = f"{v:.4g}"
+        out.append(KeyValue(key=str(k), value=str(v)))
+    return out
+
+
+def diagnostic_array(node: Node, statuses: list[tuple[str, int, str, dict[str, Any]]],
+                     stamp: Any = None) -> DiagnosticArray:
+    """DiagnosticArray of ``(name, level, message, values)`` statuses, stamped now unless ``stamp`` is given."""
+    arr = DiagnosticArray()
+    arr.header.stamp = stamp if stamp is not None else node.get_clock().now().to_msg()
+    for name, level, message, values in statuses:
+        arr.status.append(DiagnosticStatus(level=bytes([level]) if isinstance(level, int) else level, name=name,
+                                           message=message, hardware_id="atsvo_ros", values=key_values(values)))
+    return arr
+
+
+class RateMeter:
+    """Counts per stream since the last report (messages, and e.g. events): rates for the diagnostics."""
+
+    def __init__(self) -> None:
+        self._counts: dict[str, float] = {}
+        self._since = time.monotonic()
+        self._lock = threading.Lock()
+
+    def add(self, name: str, n: float = 1.0) -> None:
+        with self._lock:
+            self._counts[name] = self._counts.get(name, 0.0) + n
+
+    def rates(self) -> dict[str, float]:
+        """Per-second rates since the last call, and restart."""
+        with self._lock:
+            now = time.monotonic()
+            dt = max(now - self._since, 1e-9)
+            out = {k: v / dt for k, v in self._counts.items()}
+            self._counts = {k: 0.0 for k in self._counts}
+            self._since = now
+            return out
+
+
+class Window:
+    """The last values of a measurement (latency, tracking time) for percentiles in the diagnostics."""
+
+    def __init__(self, maxlen: int = 300) -> None:
+        self._v: deque[float] = deque(maxlen=maxlen)
+
+    def add(self, v: float) -> None:
+        self._v.append(float(v))
+
+    def percentile(self, q: float) -> float:
+        return float(np.percentile(np.fromiter(self._v, float), q)) if self._v else float("nan")
+
+    def mean(self) -> float:
+        return float(np.mean(np.fromiter(self._v, float))) if self._v else float("nan")
+
+
+def make_executor(kind: str, threads: int = 2) -> Any:
+    """The executor named by ``node.executor`` (events, multi_threaded, single_threaded)."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    if kind == "multi_threaded":
+        return MultiThreadedExecutor(num_threads=max(2, threads))
+    return SingleThreadedExecutor()
+
+
+def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | None = None,
+              threads: int = 2) -> int:
+    """Init rclpy, build the nodes, spin until Ctrl-C / shutdown, clean up; the process's exit code.
+
+    The executor is the nodes' ``node.executor`` parameter (``threads`` for the multi-threaded one). A
+    configuration error (bad parameter file) ends the process at start with one line and exit code 1;
+    Ctrl-C and external shutdowns end it with 0. A bug in a worker thread (reported through
+    ``node.fatal_error``) ends it with 1 after its traceback was logged.
+    """
+    import os
+    sys.setswitchinterval(float(os.environ.get("ATSVO_SWITCH_S", sys.getswitchinterval())))
+    rclpy.init(args=args if args is not None else sys.argv)
+    nodes: list[Node] = []
+    code = 0
+    try:
+        try:
+            nodes = list(make())
+        except AtsvoError as exc:
+            rclpy.logging.get_logger(prog).fatal(f"{prog}: {exc}")
+            return 1
+        executor = make_executor(nodes[0].config.node.executor, threads)
+        for n in nodes:
+            executor.add_node(n)
+        try:
+            while rclpy.ok() and not any(getattr(n, "fatal_error", None) for n in nodes):
+                executor.spin_once(timeout_sec=0.2)
+        finally:
+            executor.shutdown(timeout_sec=1.0)
+        if any(getattr(n, "fatal_error", None) for n in nodes):
+            code = 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for n in reversed(nodes):
+            close = getattr(n, "close", None)
+            if close is not None:
+                close()
+            n.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+__all__ = ["ERROR", "LATCHED_QOS", "OK", "OUTPUT_QOS", "REQUEST_QOS", "RateMeter", "SENSOR_QOS", "STREAM_QOS",
+           "TF_QOS", "WARN", "Window", "diagnostic_array", "event_message_class", "key_values", "make_executor",
+           "run_nodes", "stamp_msg", "uint8_array"]

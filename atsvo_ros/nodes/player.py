@@ -1,0 +1,326 @@
+"""Publish a recorded sequence over DDS at its own rate (or faster) and watch what the odometry nodes answer.
+
+What the node tests and ``atsvo-bench nodes`` use in place of a camera driver and a controller:
+:class:`BagPlayer` publishes a bag's messages as they were recorded (the serialized bytes, no
+re-encoding) with sensor-data QoS, at ``rate`` times real time, and records when each frame's
+images went out; :class:`OdometryProbe` subscribes to the odometry (reliable, like a controller),
+the per-frame status, the map, the diagnostics and calls the reset service; :class:`NodeProcesses`
+starts the nodes as a user does (console scripts), samples their memory and stops them with Ctrl-C.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from atsvo_ros.nodes._ros import LATCHED_QOS, OUTPUT_QOS, SENSOR_QOS
+
+
+def message_class(msgtype: str) -> Any:
+    """``pkg/msg/Name`` -> the rclpy class."""
+    pkg, _, name = msgtype.partition("/msg/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+@dataclass
+class Played:
+    """What a :class:`BagPlayer` sent."""
+
+    frame_stamps_ns: list[int] = field(default_factory=list)  # colour image stamps, in publishing order
+    frame_sent_s: dict[int, float] = field(default_factory=dict)  # stamp -> monotonic time both images were out
+    scheduled_s: dict[int, float] = field(default_factory=dict)  # stamp -> monotonic time it was due
+    n_messages: int = 0
+    n_event_msgs: int = 0
+    lag_s: list[float] = field(default_factory=list)  # how late each message went out
+
+
+class BagPlayer:
+    """Publishes a ROS 2 bag's messages on their topics (see the module docstring)."""
+
+    def __init__(self, node: Node, bag: str | Path, topics: Iterable[str], rgb_topic: str, depth_topic: str,
+                 events_topic: str | None = None) -> None:
+        from rosbags.highlevel import AnyReader
+
+        from atsvo_ros.io.msgtypes import register_event_types
+
+        self.node = node
+        self.rgb_topic, self.depth_topic, self.events_topic = rgb_topic, depth_topic, events_topic
+        self._events_msgtype: str | None = None
+        self._events_all = None
+        wanted = set(topics)
+        self.messages: list[tuple[int, str, bytes, int | None]] = []  # (log time, topic, cdr, header stamp)
+        self.publishers: dict[str, Any] = {}
+        with AnyReader([Path(bag)]) as reader:
+            register_event_types(reader.typestore, 2)
+            conns = [c for c in reader.connections if c.topic in wanted]
+            for c in conns:
+                if c.topic not in self.publishers:
+                    self.publishers[c.topic] = node.create_publisher(message_class(c.msgtype), c.topic, SENSOR_QOS)
+            for c in conns:
+                if c.topic == events_topic:
+                    self._events_msgtype = c.msgtype
+            for conn, t, raw in reader.messages(connections=conns):
+                raw = bytes(raw)
+                stamp = None
+                if conn.topic in (rgb_topic, depth_topic):
+                    sec, nsec = np.frombuffer(raw, "<i4", 1, 4)[0], np.frombuffer(raw, "<u4", 1, 8)[0]
+                    stamp = int(sec) * 1_000_000_000 + int(nsec)
+                self.messages.append((int(t), conn.topic, raw, stamp))
+
+    @property
+    def n_frames(self) -> int:
+        return sum(1 for m in self.messages if m[1] == self.rgb_topic)
+
+    def wait_for_subscribers(self, timeout_s: float = 20.0, topics: Iterable[str] | None = None) -> bool:
+        """True once every publisher (or those of ``topics``) is matched by a subscriber."""
+        pubs = [self.publishers[t] for t in (topics or self.publishers)]
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if all(p.get_subscription_count() > 0 for p in pubs):
+                return True
+            time.sleep(0.05)
+        return False
+
+    def repacketized(self, packet_s: float) -> list[tuple[int, str, bytes, int | None]]:
+        """The messages with the event stream cut into packets of ``packet_s`` of recording time.
+
+        A camera driver publishes event packets at a fixed wall-clock rate (about 1 kHz), so a recording
+        played ``rate`` times faster should arrive in packets of ``rate`` ms, not ``rate`` times as many
+        1 ms packets. EventPacket streams only (re-encoded in their own encoding).
+        """
+        from atsvo_ros.core.events import EventBatch
+        from atsvo_ros.io.decode import EventDecoder
+        from atsvo_ros.io.encode import serialize_event_packet
+
+        if self.events_topic is None or not (self._events_msgtype or "").endswith("EventPacket"):
+            raise ValueError("re-packetizing needs an EventPacket events topic")
+        if self._events_all is None:
+            dec = EventDecoder(self._events_msgtype, 2)
+            raws = [m[2] for m in self.messages if m[1] == self.events_topic]
+            self._events_all = (EventBatch.concatenate([dec.decode_raw(r) for r in raws]), dec.stats.encoding)
+        events, encoding = self._events_all
+        rest = [m for m in self.messages if m[1] != self.events_topic]
+        if not len(events):
+            return rest
+        step = max(1, int(round(packet_s * 1e9)))
+        edges = np.arange(events.t_first_ns, events.t_last_ns + step, step, dtype=np.int64)
+        cuts = np.searchsorted(events.t, edges, side="left")
+        packets = []
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if b > a:
+                batch = events.select(slice(int(a), int(b)))
+                packets.append((batch.t_last_ns, self.events_topic, serialize_event_packet(batch, encoding), None))
+        return sorted(rest + packets, key=lambda m: m[0])
+
+    def play(self, rate: float = 1.0, first: int = 0, last: int | None = None,
+             event_packet_wall_s: float | None = None) -> Played:
+        """Publish messages ``first:last`` at ``rate`` x their recorded timing; blocks until done.
+
+        ``event_packet_wall_s``: re-cut the event stream so packets go out at this wall-clock period
+        whatever the rate (see :meth:`repacketized`).
+        """
+        base = self.repacketized(event_packet_wall_s * rate) if event_packet_wall_s else self.messages
+        msgs = base[first:last]
+        out = Played()
+        if not msgs:
+            return out
+        t_bag0 = msgs[0][0]
+        t0 = time.monotonic() + 0.05
+        pending: dict[int, int] = {}
+        for t, topic, raw, stamp in msgs:
+            due = t0 + (t - t_bag0) * 1e-9 / rate
+            wait = due - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            self.publishers[topic].publish(raw)
+            now = time.monotonic()
+            if topic == self.events_topic:
+                out.n_event_msgs += 1
+            out.lag_s.append(now - due)
+            out.n_messages += 1
+            if stamp is not None:
+                if topic == self.rgb_topic:
+                    out.frame_stamps_ns.append(stamp)
+                    out.scheduled_s[stamp] = t0 + (stamp - t_bag0) * 1e-9 / rate
+                pending[stamp] = pending.get(stamp, 0) + 1
+                if pending[stamp] == 2:
+                    out.frame_sent_s[stamp] = now
+        return out
+
+
+class OdometryProbe:
+    """Subscribes to what the odometry nodes publish, the way a controller and a dashboard would."""
+
+    def __init__(self, node: Node, config: Any, debug_images: bool = False) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import Image, PointCloud2
+
+        topics = config.topics
+        self.node = node
+        self._lock = threading.Lock()
+        self.odometry: list[tuple[float, Any]] = []  # (monotonic receipt time, msg)
+        self.status: list[Any] = []
+        self.maps: list[Any] = []
+        self.diagnostics: dict[str, dict[str, str]] = {}  # status name -> latest values
+        self.diagnostics_count = 0
+        reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        node.create_subscription(Odometry, topics.odometry, self._on_odom, reliable)
+        node.create_subscription(DiagnosticArray, topics.status, self._on_status, reliable)
+        node.create_subscription(PointCloud2, topics.map, self._on_map, LATCHED_QOS)
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, OUTPUT_QOS)
+        self.debug: dict[str, list[Any]] = {"ats": [], "selection": []}
+        if debug_images:
+            for key, topic in (("ats", topics.debug_ats), ("selection", topics.debug_selection)):
+                node.create_subscription(Image, topic, self.debug[key].append, SENSOR_QOS)
+        from std_srvs.srv import Trigger
+
+        self.reset_client = node.create_client(Trigger, topics.reset_service)
+
+    def _on_odom(self, msg: Any) -> None:
+        with self._lock:
+            self.odometry.append((time.monotonic(), msg))
+
+    def _on_status(self, msg: Any) -> None:
+        with self._lock:
+            self.status.append(msg)
+
+    def _on_map(self, msg: Any) -> None:
+        with self._lock:
+            self.maps.append(msg)
+
+    def _on_diag(self, msg: Any) -> None:
+        with self._lock:
+            self.diagnostics_count += 1
+            for s in msg.status:
+                self.diagnostics[s.name] = {kv.key: kv.value for kv in s.values} | {"_message": s.message,
+                                                                                     "_level": int(s.level[0])}
+
+    def diag(self, name_part: str) -> dict[str, str] | None:
+        """The latest diagnostics values of the status whose name contains ``name_part``."""
+        with self._lock:
+            for name, values in self.diagnostics.items():
+                if name_part in name:
+                    return dict(values)
+        return None
+
+    def wait(self, predicate, timeout_s: float) -> bool:
+        """Poll ``predicate()`` until it holds (True) or ``timeout_s`` passes (False)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            time.sleep(0.05)
+        return predicate()
+
+    def wait_idle(self, expected: int, idle_s: float = 3.0, timeout_s: float = 60.0) -> int:
+        """Wait until ``expected`` odometry messages arrived or none came for ``idle_s``; how many came."""
+        deadline = time.monotonic() + timeout_s
+        last_n, last_change = -1, time.monotonic()
+        while time.monotonic() < deadline:
+            n = len(self.odometry)
+            if n >= expected:
+                return n
+            if n != last_n:
+                last_n, last_change = n, time.monotonic()
+            elif time.monotonic() - last_change > idle_s:
+                break
+            time.sleep(0.05)
+        return len(self.odometry)
+
+    def poses(self, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Stamps (ns) and 4x4 ``T_odom_base`` of the odometry received (from index ``since``)."""
+        from atsvo_ros.core.geometry import pose_from_tq
+
+        with self._lock:
+            msgs = [m for _, m in self.odometry[since:]]
+        stamps = np.array([m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in msgs], np.int64)
+        T = np.stack([pose_from_tq(np.array([m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z]),
+                                   np.array([m.pose.pose.orientation.x, m.pose.pose.orientation.y,
+                                             m.pose.pose.orientation.z, m.pose.pose.orientation.w]))
+                      for m in msgs]) if msgs else np.zeros((0, 4, 4))
+        return stamps, T
+
+    def reset(self, timeout_s: float = 10.0) -> Any:
+        """Call the reset service; the response (None when no answer)."""
+        from std_srvs.srv import Trigger
+
+        if not self.reset_client.wait_for_service(timeout_sec=timeout_s):
+            return None
+        future = self.reset_client.call_async(Trigger.Request())
+        deadline = time.monotonic() + timeout_s
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        return future.result() if future.done() else None
+
+
+def console_script(name: str) -> str:
+    """The console script ``name`` of this Python's environment (else whatever is on PATH)."""
+    path = Path(sys.executable).parent / name
+    return str(path) if path.exists() else name
+
+
+def rss_mb(pid: int) -> float | None:
+    """Resident memory of a process in MB (Linux /proc), None when it is gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+class NodeProcesses:
+    """Node processes started from their console scripts; RSS sampled in the background; stopped with SIGINT."""
+
+    def __init__(self, scripts: list[str], args: list[str], log_dir: str | Path, sample_s: float = 0.5) -> None:
+        self.scripts = scripts
+        log_dir = Path(log_dir)
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.logs = [log_dir / f"{s}-{os.getpid()}-{time.monotonic_ns()}.log" for s in scripts]
+        self.procs = [subprocess.Popen([console_script(s), *args], stdout=open(log, "w"), stderr=subprocess.STDOUT)
+                      for s, log in zip(scripts, self.logs)]
+        self.rss: list[tuple[float, list[float | None]]] = []  # (monotonic time, MB per process)
+        self._stop = threading.Event()
+        self._sampler = threading.Thread(target=self._sample, args=(sample_s,), daemon=True)
+        self._sampler.start()
+
+    def _sample(self, period_s: float) -> None:
+        while not self._stop.wait(period_s):
+            self.rss.append((time.monotonic(), [rss_mb(p.pid) for p in self.procs]))
+
+    def log_tail(self, n: int = 2000) -> str:
+        return " | ".join(Path(log).read_text()[-n:] for log in self.logs)
+
+    def stop(self, timeout_s: float = 30.0) -> list[int]:
+        """Ctrl-C every process; their exit codes (a process that ignores it is killed: -9)."""
+        self._stop.set()
+        for p in self.procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        codes = []
+        for p in self.procs:
+            try:
+                codes.append(p.wait(timeout=timeout_s))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+                codes.append(-9)
+        return codes
+
+
+__all__ = ["BagPlayer", "NodeProcesses", "OdometryProbe", "Played", "console_script", "message_class", "rss_mb"]

@@ -1,0 +1,231 @@
+"""The nodes as a user runs them (console scripts in subprocesses), fed over loopback DDS at the sequence's rate.
+
+A synthetic trot is published message by message (the recorded bytes, sensor-data QoS, real time)
+under the Fast DDS profile config/fastdds_shm.xml (.ci/ros_env.sh exports it); a probe subscribes to
+the odometry like a controller. Checked: one odometry per frame (minus what the node counts as
+dropped or still waiting), poses equal to ``atsvo-replay`` with ``mapping.synchronous``, ATE close to
+the replay's without it, the map, the per-frame status and /diagnostics arrive, the reset service
+works, Ctrl-C ends every process with exit code 0.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (pip install -e '.[ros]'; docs/ros_env.md)")
+pytest.importorskip("event_camera_msgs.msg", reason="event_camera_msgs not built: source .ci/ros_env.sh")
+
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+
+from atsvo_ros.config import load_config  # noqa: E402
+from atsvo_ros.core.geometry import so3_log  # noqa: E402
+from atsvo_ros.eval.metrics import EvalOptions, evaluate  # noqa: E402
+from atsvo_ros.io.trajectory import Trajectory, read_tum  # noqa: E402
+from atsvo_ros.nodes.player import BagPlayer, NodeProcesses, OdometryProbe, Played, console_script  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+PARAMS = ROOT / "config" / "synthetic.yaml"
+SIM_ARGS = ["--scenario", "trot", "--duration", "3", "--seed", "0", "--width", "160", "--height", "120",
+            "--event-scale", "0.25", "--quiet"]
+START_TIMEOUT_S = 60.0  # node start-up: imports, numba's cache, DDS discovery (a loaded CI machine)
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory):
+    """A 3 s synthetic trot (160x120 colour + depth, events, IMU, ground truth) and atsvo-replay's answer."""
+    from atsvo_ros.tools.sim import main as sim_main
+
+    base = tmp_path_factory.mktemp("nodes_dds")
+    bag = base / "trot"
+    assert sim_main([*SIM_ARGS, "--out", str(bag)]) == 0
+    out = base / "replay"
+    done = subprocess.run([console_script("atsvo-replay"), str(bag), "--out", str(out), "--preset", "synthetic",
+                           "--no-plots", "--no-progress"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    replay = read_tum(out / "trajectory.tum")
+    metrics = json.loads((out / "metrics.json").read_text())
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["mode"] == "fused"
+    return bag, replay, metrics, read_tum(out / "groundtruth.tum"), base
+
+
+@dataclass
+class Run:
+    played: Played
+    probe: OdometryProbe
+    stamps: np.ndarray
+    poses: np.ndarray
+    diag: dict[str, str]
+    statuses: list[str]
+    reset_ok: bool | None
+    exit_codes: list[int]
+    logs: list[str]
+
+
+def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check_reset: bool = False,
+         debug_images: bool = False) -> Run:
+    bag, *_, base = sequence
+    cfg = load_config("synthetic")
+    t = cfg.topics
+    args = ["--ros-args", "--params-file", str(PARAMS), "-p", f"mapping.synchronous:={str(synchronous).lower()}",
+            "-p", f"node.queue_size:={queue_size}", "-p", "node.diagnostics_period_s:=0.25"]
+    procs = NodeProcesses(scripts, args, base / "logs")
+    context = Context()
+    rclpy.init(context=context)
+    executor = None
+    try:
+        node = rclpy.create_node("atsvo_test_probe", context=context)
+        player = BagPlayer(node, bag, [t.rgb, t.depth, t.rgb_info, t.event_info, t.events, t.imu], t.rgb, t.depth)
+        probe = OdometryProbe(node, cfg, debug_images=debug_images)
+        executor = MultiThreadedExecutor(num_threads=2, context=context)
+        executor.add_node(node)
+        threading.Thread(target=executor.spin, daemon=True).start()
+        assert player.wait_for_subscribers(START_TIMEOUT_S), "the tracking node did not subscribe: " + \
+            procs.log_tail()
+        if "tracking_node" in scripts:
+            assert probe.wait(lambda: (probe.diag("odometry") or {}).get("mapping") == "connected", START_TIMEOUT_S), \
+                f"tracking_node never saw mapping_node: {probe.diag('odometry')}"
+        # Both ends of every topic matched (a reader can match a moment after its writer did).
+        time.sleep(1.0)
+        played = player.play(rate=1.0)
+        n_frames = len(played.frame_stamps_ns)
+        probe.wait_idle(n_frames - 1, idle_s=4.0)
+        n_diag = probe.diagnostics_count
+        assert probe.wait(lambda: probe.diagnostics_count > n_diag + 1, 10.0), "no /diagnostics"
+        diag = probe.diag("atsvo_tracking: odometry")
+        stamps, poses = probe.poses()
+        statuses = [s.status[0].message for s in probe.status]
+        reset_ok = None
+        if check_reset:
+            reset_ok = _check_reset(player, probe)
+    finally:
+        codes = procs.stop()
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        rclpy.try_shutdown(context=context)
+    logs = [Path(log).read_text() for log in procs.logs]
+    return Run(played, probe, stamps, poses, diag, statuses, reset_ok, codes, logs)
+
+
+def _check_reset(player: BagPlayer, probe: OdometryProbe) -> bool:
+    """Reset, replay the first second: the odometry starts over at the identity, initialising, then tracks."""
+    response = probe.reset()
+    assert response is not None and response.success, response
+    n0 = len(probe.odometry)
+    t_end = player.messages[0][0] + 1_000_000_000
+    last = next(i for i, m in enumerate(player.messages) if m[0] > t_end)
+    played = player.play(rate=1.0, last=last)
+    probe.wait_idle(n0 + len(played.frame_stamps_ns), idle_s=3.0)
+    stamps, poses = probe.poses(since=n0)
+    statuses = [s.status[0].message for s in probe.status[n0:]]
+    # the frame the first run left waiting goes first (at the identity of the new start), then the replayed ones
+    assert len(stamps) >= len(played.frame_stamps_ns) - 1, (len(stamps), len(played.frame_stamps_ns))
+    assert np.allclose(poses[0], np.eye(4)) and statuses[0] == "initialising", (poses[0], statuses[:3])
+    assert statuses[-1] == "ok" and np.linalg.norm(poses[-1][:3, 3]) > 0.05  # tracking again, and moving
+    return True
+
+
+def _pose_errors(run: Run, ref: Trajectory) -> tuple[float, float]:
+    """Largest position (m) and rotation (deg) difference to the replay, pose by pose at equal stamps."""
+    index = {int(s): i for i, s in enumerate(ref.stamps_ns)}
+    assert all(int(s) in index for s in run.stamps), "the node published stamps the replay does not have"
+    dp = [np.linalg.norm(T[:3, 3] - ref.T_w_b[index[int(s)]][:3, 3]) for s, T in zip(run.stamps, run.poses)]
+    dr = [np.degrees(np.linalg.norm(so3_log(T[:3, :3].T @ ref.T_w_b[index[int(s)]][:3, :3])))
+          for s, T in zip(run.stamps, run.poses)]
+    return max(dp), max(dr)
+
+
+def _check_common(run: Run) -> None:
+    """One odometry per frame minus counted drops, status and map and diagnostics arrived, Ctrl-C -> 0."""
+    d = run.diag
+    assert d is not None, "no diagnostics from the tracking node"
+    n_frames = len(run.played.frame_stamps_ns)
+    accounted = (len(run.stamps) + int(d["queue_drops"]) + int(d["sync_dropped_rgb"]) + int(d["frames_waiting"])
+                 + int(d.get("count_frames_duplicate", 0)) + int(d.get("count_frames_out_of_order", 0)))
+    assert accounted == n_frames, (len(run.stamps), n_frames, d)
+    assert int(d["frames_waiting"]) <= 1  # at most the last frame, whose events never got completed
+    assert len(run.statuses) == len(run.stamps) and run.probe.maps, "per-frame status or map missing"
+    cloud = run.probe.maps[-1]
+    assert cloud.width > 100 and cloud.header.frame_id == "odom" and [f.name for f in cloud.fields] == \
+        ["x", "y", "z", "intensity"]
+    assert run.exit_codes == [0] * len(run.exit_codes), (run.exit_codes, [log[-1500:] for log in run.logs])
+
+
+def _ate(run: Run, gt: Trajectory) -> float:
+    ev = evaluate(gt, Trajectory(run.stamps, run.poses), EvalOptions(interpolate_gt=True),
+                  est_ok=np.array([s == "ok" for s in run.statuses]))
+    return float(ev.metrics["ate_rmse_m"])
+
+
+@pytest.mark.parametrize("scripts", [["atsvo_node"], ["mapping_node", "tracking_node"]], ids=["atsvo_node", "split"])
+def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
+    """mapping.synchronous + a queue that never drops: the node's odometry is the replay's, pose for pose."""
+    _, replay, *_ = sequence
+    run = _run(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"])
+    _check_common(run)
+    d = run.diag
+    assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
+    assert int(d["count_event_msgs"]) > 2900 and int(d.get("count_imu_late", 0)) == 0, d
+    dp, dr = _pose_errors(run, replay)
+    assert dp < 1e-3 and dr < 0.05, (dp, dr)
+    assert len(run.stamps) == len(replay.stamps_ns) - 1  # all but the last frame, which waits for more events
+    if scripts != ["atsvo_node"]:
+        assert int(d["mapping_timeouts"]) == 0 and int(d["mapping_answers"]) == int(d["mapping_sent"]) > 3
+    else:
+        assert run.reset_ok
+
+
+@pytest.mark.parametrize("scripts", [["atsvo_node"], ["mapping_node", "tracking_node"]], ids=["atsvo_node", "split"])
+def test_asynchronous_nodes_are_as_accurate_as_the_replay(sequence, scripts):
+    """The default (PTAM: tracking goes on while mapping works): ATE within 50 % or 5 mm of the replay's."""
+    _, _, metrics, gt, _ = sequence
+    run = _run(sequence, scripts, synchronous=False, queue_size=2, debug_images=scripts == ["atsvo_node"])
+    _check_common(run)
+    if scripts == ["atsvo_node"]:  # someone subscribes to the debug images: they come, one per frame or so
+        ats, sel = run.probe.debug["ats"], run.probe.debug["selection"]
+        assert len(ats) > 0.5 * len(run.stamps) and len(sel) > 0.5 * len(run.stamps)
+        assert (ats[-1].encoding, sel[-1].encoding, ats[-1].width) == ("mono8", "rgb8", 80)
+    ate, ref = _ate(run, gt), metrics["ate_rmse_m"]
+    assert ate <= max(1.5 * ref, ref + 0.005), (ate, ref)
+
+
+def test_a_bad_parameter_file_stops_the_node_with_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**:\n  ros__parameters:\n    tracker:\n      max_iterations: 500\n")
+    for script in ("atsvo_node", "tracking_node", "mapping_node"):
+        done = subprocess.run([console_script(script), "--ros-args", "--params-file", str(bad)], capture_output=True,
+                              text=True, timeout=120)
+        lines = [ln for ln in (done.stdout + done.stderr).splitlines() if ln.strip()]
+        assert done.returncode == 1, (script, done.stdout, done.stderr)
+        assert len(lines) == 1 and "tracker.max_iterations = 500" in lines[0] and "[1, 200]" in lines[0], lines
+
+
+def test_without_event_messages_the_node_says_so_once_and_runs_rgbd(tmp_path):
+    """The pip route without the built event messages: one line, then RGB-D (here: it starts and stops cleanly)."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in env.get("PYTHONPATH", "").split(os.pathsep)
+                                        if "ros_msgs" not in p)
+    proc = subprocess.Popen([console_script("tracking_node"), "--ros-args", "--params-file", str(PARAMS)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline and not any("tracking: mode" in ln for ln in lines):
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+    proc.send_signal(signal.SIGINT)
+    rest, _ = proc.communicate(timeout=30)
+    warn = [ln for ln in lines if "event_camera_msgs" in ln and "RGB-D only" in ln]
+    assert len(warn) == 1 and "not installed" in warn[0], lines
+    assert any("tracking: mode rgbd" in ln for ln in lines) and proc.returncode == 0, (lines, rest)
