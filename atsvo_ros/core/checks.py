@@ -7,7 +7,8 @@ residual term apart and look for what a wrong pose leaves behind:
 * lost: no estimate, a singular system, too few photometric inliers, degenerate geometry (a
   position standard deviation above ``max_position_std_m``), a brightness-gain jump no camera makes
   in one frame, a pose jump larger than ``max_step_m`` / ``max_step_rot_deg``, or patches that do not
-  correlate with the image at all (mean ZNCC below ``lost_zncc``);
+  correlate with the image at all (mean ZNCC below ``lost_zncc``, judged on the terms that pass their
+  inlier counts);
 * degraded: tracked, but the inlier patches correlate poorly with the image (mean ZNCC below
   ``min_zncc``: they landed on other texture), the rotation disagrees with the gyro's prediction by
   more than ``max_gyro_disagreement_deg``, or the depth term rejects most of its points (the
@@ -43,11 +44,13 @@ class Verdict:
 
 
 def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: np.ndarray,
-          affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: float,
+          affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: dict[str, float],
           gyro_T_c_w: np.ndarray | None = None) -> Verdict:
     """Apply the checks of the module docstring to one tracking result.
 
-    ``zncc`` is the best mean ZNCC of the image terms' inlier patches; ``gyro_T_c_w`` the gyro's prediction.
+    ``zncc`` is the mean ZNCC of each image term's inlier patches (by block name); only the terms that pass
+    their own inlier counts are judged by it: a dozen blurred colour patches mid-flip correlate with
+    nothing while the ATS term holds the pose. ``gyro_T_c_w`` is the gyro's prediction.
     """
     cfg = config.tracker
     if not res.ok:
@@ -72,10 +75,12 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
     rot, trans = relative_motion(se3_inv(reference), se3_inv(T_c_w))
     if trans > cfg.max_step_m or np.degrees(rot) > cfg.max_step_rot_deg:
         return Verdict.lost(f"jump of {trans:.3f} m / {np.degrees(rot):.1f} deg in one frame")
-    if np.isfinite(zncc) and zncc < cfg.lost_zncc:
-        return Verdict.lost(f"patches do not match the image (mean ZNCC {zncc:.2f})")
-    if np.isfinite(zncc) and zncc < cfg.min_zncc:
-        return Verdict(DEGRADED, f"patches match the image poorly (mean ZNCC {zncc:.2f})")
+    carrying = {n: z for n, z in zncc.items() if n not in failing and np.isfinite(z)}
+    best = max(carrying.values(), default=float("nan"))
+    if np.isfinite(best) and best < cfg.lost_zncc:
+        return Verdict.lost(f"patches do not match the image (mean ZNCC {best:.2f})")
+    if np.isfinite(best) and best < cfg.min_zncc:
+        return Verdict(DEGRADED, f"patches match the image poorly (mean ZNCC {best:.2f})")
     if gyro_T_c_w is not None:
         off = np.degrees(rotation_angle_rad(T_c_w[:3, :3] @ gyro_T_c_w[:3, :3].T))
         if off > cfg.max_gyro_disagreement_deg:

@@ -94,7 +94,7 @@ class PreparedFrame:
     depth_m: np.ndarray  # float32 metres, NaN/out of range kept as given (the mapper validates)
     depth_pyramid: list[np.ndarray]  # float32 per level, 0 = invalid
     n_valid_depth: int
-    textured_fraction: float = 1.0  # share of half-resolution pixels whose gradient passes the selection floor
+    contrast: float = 255.0  # standard deviation of the grey image (0-255) at 1/4 resolution
 
     @property
     def grey(self) -> np.ndarray:
@@ -105,12 +105,11 @@ class RgbdFrontEnd(ImageFrontEnd):
     """The colour camera's front end; the aligned depth follows the colour image."""
 
     def __init__(self, raw_camera: CameraModel, levels: int, depth_min_m: float, depth_max_m: float,
-                 depth_edge_ratio: float, min_gradient: float = 7.0) -> None:
+                 depth_edge_ratio: float) -> None:
         super().__init__(raw_camera, levels)
         self.depth_min_m = float(depth_min_m)
         self.depth_max_m = float(depth_max_m)
         self.depth_edge_ratio = float(depth_edge_ratio)
-        self.min_gradient = float(min_gradient)
 
     def prepare(self, frame: RgbdFrame) -> PreparedFrame:
         """Check, rectify and build the pyramids of one frame."""
@@ -129,13 +128,7 @@ class RgbdFrontEnd(ImageFrontEnd):
         dpyr = depth_pyramid(depth, self.n_levels, self.depth_edge_ratio, self.depth_min_m, self.depth_max_m)
         pyr = self.pyramid(grey)
         return PreparedFrame(int(frame.stamp_ns), pyr, depth, dpyr, int(np.count_nonzero(dpyr[0])),
-                             _textured_fraction(pyr[min(1, len(pyr) - 1)], self.min_gradient))
-
-
-def _textured_fraction(level: np.ndarray, min_gradient: float) -> float:
-    """Share of pixels of one pyramid level ([I, Ix, Iy]) whose gradient norm exceeds ``min_gradient``."""
-    g2 = level[..., 1] ** 2 + level[..., 2] ** 2
-    return float(np.count_nonzero(g2 > min_gradient**2)) / max(1, g2.size)
+                             float(np.std(pyr[min(2, len(pyr) - 1)][..., 0])))
 
 
 __all__ = ["ImageFrontEnd", "PreparedFrame", "RgbdFrontEnd", "to_grey", "usable_levels"]

@@ -78,8 +78,7 @@ class Odometry:
         self.config = config
         self.raw_camera = rgb_camera
         self.frontend = RgbdFrontEnd(rgb_camera, config.tracker.pyramid_levels, config.rig.depth_min_m,
-                                     config.rig.depth_max_m, config.mapping.depth_edge_ratio,
-                                     config.rgb_selection.min_gradient)
+                                     config.rig.depth_max_m, config.mapping.depth_edge_ratio)
         self.camera = self.frontend.camera
         self.cameras = self.frontend.cameras
         self.n_levels = self.frontend.n_levels
@@ -197,7 +196,7 @@ class Odometry:
         if not self.tracking.colour_usable(prepared) and status is not TrackingStatus.DEGRADED:
             # one sensor is blind: the pose rests on depth (and events) alone, and the map is left as it is
             status = TrackingStatus.DEGRADED
-            blind = (f"colour image without texture ({100 * prepared.textured_fraction:.2f} % textured pixels: "
+            blind = (f"colour image without contrast (grey standard deviation {prepared.contrast:.1f}: "
                      "lens covered, dark or saturated?): tracked on depth alone")
             note = f"{note}; {blind}" if note else blind
         t_track = time.perf_counter() - t0

@@ -94,8 +94,12 @@ class Tracking:
         self.snapshot = snapshot
 
     def colour_usable(self, frame: PreparedFrame) -> bool:
-        """Whether the colour image has texture to align (not a covered lens, darkness or saturation)."""
-        return frame.textured_fraction >= self.config.tracker.min_textured_fraction
+        """Whether the colour image shows anything (not a covered lens, darkness or saturation).
+
+        Judged by contrast, not by gradients: motion blur mid-flip wipes out the gradients (0.01 % of pixels
+        above the selection floor) while the RGB term still holds the pose; a blind image has no contrast.
+        """
+        return frame.contrast >= self.config.tracker.min_contrast
 
     @property
     def has_map(self) -> bool:
@@ -161,9 +165,9 @@ class Tracking:
         states = res.states.get("rgb", np.zeros(0, np.int8))
         inl = states == INLIER
         new_affine = self._new_affine(res, frame, T_c_w, inl, affine)
-        zncc = max((_mean_zncc(b) for b in blocks if isinstance(b, PhotometricBlock)), default=float("nan"),
-                   key=lambda z: -np.inf if np.isnan(z) else z)
-        verdict = judge(self.config, res, T_c_w, reference, affine, new_affine, zncc, gyro_T_c_w)
+        znccs = {b.name: _mean_zncc(b) for b in blocks if isinstance(b, PhotometricBlock)}
+        zncc = max(znccs.values(), default=float("nan"), key=lambda z: -np.inf if np.isnan(z) else z)
+        verdict = judge(self.config, res, T_c_w, reference, affine, new_affine, znccs, gyro_T_c_w)
         if len(states) == len(self._outlier_runs):
             self._outlier_runs = np.where(states == OUTLIER, self._outlier_runs + 1,
                                           np.where(states == INLIER, 0, self._outlier_runs)).astype(np.int32)

@@ -26,7 +26,8 @@ I4 = np.eye(4)
 
 
 def _judge(res=None, T=I4, ref=I4, aff=((0.0, 0.0), (0.0, 0.0)), zncc=0.9, gyro=None):
-    return judge(CFG, res or _result(), T, ref, aff[0], aff[1], zncc, gyro)
+    return judge(CFG, res or _result(), T, ref, aff[0], aff[1], zncc if isinstance(zncc, dict) else {"rgb": zncc},
+                 gyro)
 
 
 def test_a_good_estimate_is_ok():
@@ -54,3 +55,15 @@ def test_each_rule_alone(kwargs, level, words):
 
 def test_agreement_with_the_gyro_within_its_tolerance_is_ok():
     assert _judge(gyro=se3_exp(np.array([0, 0, 0, 0.0, 0.02, 0]))).level == OK  # 1.1 deg < 2 deg
+
+
+def test_zncc_of_a_term_too_small_to_count_does_not_lose_the_frame():
+    # Mid-flip: a dozen blurred colour patches (fewer than min_inliers) correlate with nothing while the ATS
+    # term holds the pose; the frame is judged on the ATS term.
+    blocks = {"rgb": BlockStats(12, 12, 12, 1, 1, 1), "ats": BlockStats(331, 331, 330, 1, 1, 1),
+              "depth": BlockStats(800, 389, 389, 1, 1, 1)}
+    assert _judge(res=_result(blocks=blocks), zncc={"rgb": 0.05, "ats": 0.7}).level == OK
+    # the same correlation on a colour term that carries the pose: lost
+    carrying = {**blocks, "rgb": BlockStats(1000, 1000, 900, 1, 1, 1)}
+    v = _judge(res=_result(blocks=carrying), zncc={"rgb": 0.05, "ats": float("nan")})
+    assert v.level == LOST and "ZNCC 0.05" in v.reason

@@ -63,7 +63,7 @@ def test_lens_covered_is_tracked_on_depth_alone_reported_degraded_and_recovered(
     _, res = _run(room, range(26), "lens covered", range(8, 16))
     for k in range(8, 16):
         r = res[k]
-        assert r.status is TrackingStatus.DEGRADED and "colour image without texture" in r.reason
+        assert r.status is TrackingStatus.DEGRADED and "colour image without contrast" in r.reason
         assert "rgb" not in r.inliers and r.inliers["depth"] > 100 and not r.keyframe_inserted
         assert _error(r, k)[0] < 0.01  # measured 0.2 cm on depth alone
         # one sensor is blind, nothing is in doubt: the depth term's own covariance, not the x100 of a doubt
