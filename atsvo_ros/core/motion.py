@@ -4,8 +4,9 @@ The history holds the colour camera poses ``T_c_w`` of the last trusted frames. 
 prediction extrapolates the last inter-frame motion to the new stamp (scaled by the time ratio, so
 a dropped frame is bridged); the zero-motion prediction repeats the last pose. With a gyro, the
 rotation between the last frame and the new one comes from integrating the IMU's angular velocity
-(bias-corrected), which is accurate to a small fraction of a degree over one frame even at the
-rates of a backflip; the translation still comes from constant motion.
+(no bias is estimated: a turn-on bias of ~1 deg/s adds ~0.03 deg per frame), which is accurate to
+a small fraction of a degree over one frame even at the rates of a backflip;
+the translation still comes from constant motion.
 
 :meth:`MotionModel.relative_motion` gives the paper's relative-motion factor of ``T_{i-2}, T_{i-1}``
 as angular and linear velocity (rad/s, m/s), independent of the frame rate.

@@ -43,7 +43,8 @@ were a rate. Two readings keep the described behaviour:
 
 Measured (``atsvo-bench ats-basin``, table in the README): the basin of the ATS term alone is set mostly by the
 pattern, the blur and the pyramid, not by the decay: 3-6 px on one level for every rule, 16-22 px and ~4 deg
-(simulated backflip/bound) with the tracker's 4 levels. On one level ``fire_age`` removes the notch's cost
+(simulated backflip/bound) with 4 pyramid levels (the event camera's, at 320x240). On one level ``fire_age``
+removes the notch's cost
 at low and medium speed (sparse scene, 300/1000 px/s: 5/6 px vs 3/4 px for ``mean_age``), but at 3000
 px/s, where ``tau_l`` bounds both, ``mean_age``'s long ghost band reaches further against the motion (8 vs
 2 px; the pyramid evens it out: 22 vs 16 px). On the simulated dense sequences ``mean_age`` converges from

@@ -1,7 +1,7 @@
 """Coarse-to-fine Levenberg-Marquardt on SE(3) over residual blocks (the optimiser of Eq. 4).
 
 The cost is a weighted sum of :class:`~atsvo_ros.core.residuals.ResidualBlock` terms (photometric
-RGB, geometric depth, the ATS term of the fusion, a rotation prior); each contributes to one joint
+RGB, geometric point-to-plane depth, the ATS term of Eq. 4); each contributes to one joint
 normal equation in the RGB camera pose (a left perturbation of ``T_rgb_world``) plus, when it
 estimates a brightness model, its own affine gain/offset ``(a, b)``. This module knows nothing of
 images or depth: only of blocks.

@@ -137,8 +137,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
                                   logger=log, core_factory=odometry_factory)
         use_events = runtime.use_events
         if mode == "fused" and not use_events:
-            notes.append("RGB-D only: " + ("the bag has no event topic" if not source.has("events")
-                                           else "the odometry core does not fuse events yet"))
+            notes.append("RGB-D only: the bag has no event topic")
         outputs: list = []
         gt_samples: list | None = [] if gt_file is None and source.has("ground_truth") else None
         t_wall0 = time.perf_counter()
