@@ -19,8 +19,10 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        # Node parameters and the Fast DDS profile for camera-sized images (config/fastdds_shm.xml).
-        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml")) + ["config/fastdds_shm.xml"]),
+        # Node parameters, the Fast DDS profile for camera-sized images (config/fastdds_shm.xml) and the
+        # Foxglove layout for `atsvo-replay --record` bags (config/foxglove_layout.json).
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml")) + ["config/fastdds_shm.xml",
+                                                                      "config/foxglove_layout.json"]),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     package_data={PACKAGE: ["config/*.yaml"]},
@@ -73,6 +75,7 @@ setup(
             "h5py>=3.8",
             "evo>=1.20",
             "dv-processing>=2.0",
+            "mcap-ros2-support>=0.5",  # reads --record bags as Foxglove does: by the schemas inside the file
         ],
     },
     zip_safe=True,

@@ -86,3 +86,7 @@ class SimulationError(AtsvoError):
 
 class WireError(AtsvoError):
     """A message of the atsvo wire format (keyframe requests, map snapshots between processes) is malformed."""
+
+
+class RecordError(AtsvoError):
+    """A run cannot be recorded as a bag (the output exists, a bad file name, no mcap writer in rosbags)."""

@@ -7,7 +7,9 @@ with depth and cuts the event stream at frame stamps; the IMU stream is cut at t
 frame waits until the IMU has passed it, unless the IMU is silent for :attr:`OdometryRuntime.IMU_STALL_NS`),
 so the core sees, for every frame, exactly the samples up to its exposure time whatever order they
 arrived in (the replay and the ROS node give the same poses). :meth:`OdometryRuntime.poll` runs the
-core on every frame that became complete and returns one :class:`RuntimeOutput` per frame.
+core on every frame that became complete and returns one :class:`RuntimeOutput` per frame; output
+sinks (e.g. ``atsvo-replay --record``) get each output right after its frame, while the core still
+holds that frame's state.
 
 The two halves can run in different threads (the ROS node): :meth:`~OdometryRuntime.pop_ready`
 (cheap: pairing, event decoding and cutting) in the thread that receives the data, and
@@ -26,7 +28,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -89,6 +91,10 @@ class RuntimeOutput:
     n_events: int
 
 
+#: An output sink (e.g. the bag recorder of ``atsvo-replay --record``): ``sink(output, core)`` after each frame.
+Sink = Callable[[RuntimeOutput, OdometryCore], None]
+
+
 def _no_log(level: str, text: str) -> None:
     del level, text
 
@@ -117,8 +123,10 @@ class OdometryRuntime:
     def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel | None = None,
                  event_camera: CameraModel | None = None, *, use_events: bool | None = None,
                  logger: Logger | None = None, core_factory: Callable[..., OdometryCore] | None = None,
-                 log_interval_s: float = 10.0) -> None:
+                 log_interval_s: float = 10.0, sinks: Sequence[Sink] = ()) -> None:
         self.config = config
+        #: called with every output, right after its frame (the core holds that frame's state: surface, map)
+        self.sinks: tuple[Sink, ...] = tuple(sinks)
         self._log = logger or _no_log
         self._factory = core_factory or _default_core()
         self.use_events = config.mode == "fused" if use_events is None else bool(use_events)
@@ -304,14 +312,21 @@ class OdometryRuntime:
         return self._release(self._imu_ready(final=True))
 
     def process(self, inp: FrameInput) -> RuntimeOutput | None:
-        """Run the core on one frame (its IMU samples and events first); None when the frame is skipped."""
+        """Run the core on one frame (its IMU samples and events first); None when the frame is skipped.
+
+        The output also goes to every sink (:attr:`sinks`) before it is returned.
+        """
         core = self._ensure_core()
         if core is None:
             self._problem("frames_waiting_camera_info", "waiting for the colour camera_info; frame skipped")
             return None
         if len(inp.imu):
             core.add_imu(inp.imu)
-        return self._process(core, inp.frame, inp.events)
+        out = self._process(core, inp.frame, inp.events)
+        if out is not None:
+            for sink in self.sinks:
+                sink(out, core)
+        return out
 
     def reset(self) -> None:
         """Start over: the next frame builds a new core (new map, pose back to the identity).
@@ -473,4 +488,4 @@ def _cdr_stamp_ns(raw: bytes | bytearray | memoryview) -> int | None:
     return sec * 1_000_000_000 + nanosec
 
 
-__all__ = ["FrameInput", "Logger", "OdometryCore", "OdometryRuntime", "RuntimeOutput"]
+__all__ = ["FrameInput", "Logger", "OdometryCore", "OdometryRuntime", "RuntimeOutput", "Sink"]

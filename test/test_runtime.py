@@ -315,3 +315,37 @@ def _poll_one(rt, cfg, item):
     else:
         rt.add_imu_msg(msg)
     return rt.poll()
+
+
+def test_sinks_get_every_output_right_after_its_frame():
+    """An output sink (the --record bag writer) sees the core in the state of the frame it gets, even when one
+    poll processes several frames."""
+    from atsvo_ros.core.frame import OdometryResult, TrackingStatus
+
+    class Core:
+        def __init__(self, config, rgb_camera, event_camera=None):
+            self.frames = []
+
+        def add_events(self, batch):
+            pass
+
+        def add_imu(self, batch):
+            pass
+
+        def process_frame(self, frame):
+            self.frames.append(frame.stamp_ns)
+            return OdometryResult(frame.stamp_ns, np.eye(4), np.eye(4), np.eye(6), TrackingStatus.OK, "rgbd", 0.0, 1,
+                                  1, False)
+
+    cfg = load_config("synthetic")
+    seen = []
+    rt = OdometryRuntime(cfg, cfg.rgb_camera.model(), use_events=False, core_factory=Core,
+                         sinks=[lambda out, core: seen.append((out.result.stamp_ns, list(core.frames)))])
+    w, h = cfg.rgb_camera.width, cfg.rgb_camera.height
+    stamps = [1_000_000_000 + i * 33_000_000 for i in range(5)]
+    for s in stamps:
+        rt.add_rgb(s, np.full((h, w, 3), 128, np.uint8))
+        rt.add_depth(s, np.full((h, w), 2.0, np.float32))
+    outputs = rt.poll()  # the five frames in one poll
+    assert [o.result.stamp_ns for o in outputs] == [s for s, _ in seen] == stamps
+    assert [frames for _, frames in seen] == [stamps[:i + 1] for i in range(5)]

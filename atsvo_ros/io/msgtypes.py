@@ -65,3 +65,15 @@ def register_event_types(store: Any, ros_version: int = 2) -> None:
         types.update(get_types_from_msg(ros1 if ros_version == 1 else ros2, name))
     if types:
         store.register(types)
+
+
+def transient_local_qos() -> Any:
+    """The offered QoS of a latched topic (/tf_static, a map) in a ROS 2 bag: reliable, transient local, depth 1.
+
+    ``ros2 bag play`` offers it again, so a late subscriber (RViz, tf2) still gets the message.
+    """
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    never = QosTime(sec=0x7FFFFFFF, nsec=0xFFFFFFFF)
+    return Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, never, never,
+               QosLiveliness.AUTOMATIC, never, False)

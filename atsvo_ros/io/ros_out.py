@@ -108,6 +108,9 @@ def pose_from_transform_msg(msg: Any) -> np.ndarray:
     return pose_from_tq(np.array([t.x, t.y, t.z]), np.array([q.x, q.y, q.z, q.w]))
 
 
+#: frame_id of the debug images (/atsvo/debug/*): the event camera after rectification onto its pinhole model.
+DEBUG_IMAGE_FRAME = "atsvo_event_camera_rectified"
+
 #: Fields of the published map (sensor_msgs/PointCloud2): name, byte offset, datatype (7 = FLOAT32), count.
 MAP_CLOUD_FIELDS = (("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("intensity", 12, 7, 1))
 MAP_CLOUD_POINT_STEP = 16
@@ -126,6 +129,16 @@ def map_cloud_data(points_w: np.ndarray, intensity: np.ndarray, T_odom_world: np
     out[:, :3] = transform_points(np.asarray(T_odom_world, dtype=np.float64), p) if len(p) else p
     out[:, 3] = np.asarray(intensity, dtype=np.float64).reshape(-1)
     return out
+
+
+def map_cloud_from_snapshot(snapshot: Any, T_odom_world: np.ndarray) -> np.ndarray:
+    """:func:`map_cloud_data` of a map snapshot: its photometric points, coloured by their patch centre.
+
+    The intensity is the first pyramid level's first pattern sample of each point's patch (zero for a
+    snapshot without patches).
+    """
+    intensity = snapshot.patches[0, :, 0] if snapshot.patches.size else snapshot.host_depth * 0.0
+    return map_cloud_data(snapshot.points_w, intensity, T_odom_world)
 
 
 def _cov36(cov: np.ndarray) -> np.ndarray:

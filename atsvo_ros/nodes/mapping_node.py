@@ -22,7 +22,7 @@ from std_msgs.msg import Header, UInt8MultiArray
 
 from atsvo_ros.core.map import MapSnapshot
 from atsvo_ros.errors import WireError
-from atsvo_ros.io.ros_out import MAP_CLOUD_FIELDS, MAP_CLOUD_POINT_STEP, map_cloud_data
+from atsvo_ros.io.ros_out import MAP_CLOUD_FIELDS, MAP_CLOUD_POINT_STEP, map_cloud_from_snapshot
 from atsvo_ros.io.wire import uint8_multiarray_cdr, uint8_multiarray_payload
 from atsvo_ros.mapping_remote import MappingServer
 from atsvo_ros.nodes._params import declare_config
@@ -83,8 +83,7 @@ class MappingNode(Node):
         with self._lock:
             self.n_snapshots += 1
             self.last_snapshot = snapshot
-        intensity = snapshot.patches[0, :, 0] if snapshot.patches.size else snapshot.host_depth * 0.0
-        data = map_cloud_data(snapshot.points_w, intensity, self._T_odom_world)
+        data = map_cloud_from_snapshot(snapshot, self._T_odom_world)
         msg = PointCloud2(header=Header(stamp=self.get_clock().now().to_msg(), frame_id=self.config.topics.odom_frame),
                           height=1, width=len(data), is_bigendian=False, point_step=MAP_CLOUD_POINT_STEP,
                           row_step=MAP_CLOUD_POINT_STEP * len(data), is_dense=True,

@@ -17,7 +17,6 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import (
@@ -38,10 +37,11 @@ from sensor_msgs.msg import CameraInfo, Image, Imu
 from std_msgs.msg import Header, UInt8MultiArray
 from std_srvs.srv import Trigger
 
+from atsvo_ros.core.debug_images import render_debug_images
 from atsvo_ros.core.map import MapSnapshot
 from atsvo_ros.errors import WireError
 from atsvo_ros.frame_queue import DropOldestQueue, Worker
-from atsvo_ros.io.ros_out import MsgClasses, odometry_msg, transform_msg
+from atsvo_ros.io.ros_out import DEBUG_IMAGE_FRAME, MsgClasses, odometry_msg, transform_msg
 from atsvo_ros.io.wire import uint8_multiarray_cdr, uint8_multiarray_payload
 from atsvo_ros.mapping_remote import RemoteMapping, mapping_digest
 from atsvo_ros.nodes._params import declare_config
@@ -282,18 +282,14 @@ class TrackingNode(Node):
         events = getattr(self.runtime.core, "events", None)
         if events is None:
             return
-        frame = events.render(stamp_ns)
-        grey = np.clip(frame.surface, 0, 255).astype(np.uint8)
-        header = Header(stamp=stamp_msg(stamp_ns), frame_id="atsvo_event_camera_rectified")
+        images = render_debug_images(events, stamp_ns, selection=self.debug_sel_pub.get_subscription_count() > 0)
+        grey, rgb = images.ats, images.selection
+        header = Header(stamp=stamp_msg(stamp_ns), frame_id=DEBUG_IMAGE_FRAME)
         h, w = grey.shape
         if self.debug_ats_pub.get_subscription_count():
             self.debug_ats_pub.publish(Image(header=header, height=h, width=w, encoding="mono8", step=w,
                                              data=uint8_array(grey)))
-        if self.debug_sel_pub.get_subscription_count():
-            sel = events.select(frame).selected
-            rgb = np.repeat(grey[..., None], 3, axis=2)
-            if len(sel):
-                rgb[sel[:, 1], sel[:, 0]] = (255, 0, 0)
+        if rgb is not None:
             self.debug_sel_pub.publish(Image(header=header, height=h, width=w, encoding="rgb8", step=3 * w,
                                              data=uint8_array(rgb)))
 

@@ -25,7 +25,7 @@ from atsvo_ros.core.geometry import quat_from_rotmat
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError
 from atsvo_ros.io.encode import ENCODINGS, serialize_dvs_event_array, serialize_event_packet
-from atsvo_ros.io.msgtypes import typestore
+from atsvo_ros.io.msgtypes import transient_local_qos, typestore
 from atsvo_ros.io.trajectory import Trajectory, write_tum
 from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, SimRig, iter_sequence, model_key, sequence_rig
 
@@ -175,12 +175,7 @@ class _BagSink:
         if latching and self.fmt == "ros1":
             kw["latching"] = 1
         elif latching:  # /tf_static: transient local, so `ros2 bag play` latches it like tf2 expects
-            from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
-
-            never = QosTime(sec=0x7FFFFFFF, nsec=0xFFFFFFFF)
-            kw["offered_qos_profiles"] = [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE,
-                                              QosDurability.TRANSIENT_LOCAL, never, never,
-                                              QosLiveliness.AUTOMATIC, never, False)]
+            kw["offered_qos_profiles"] = [transient_local_qos()]
         self.conns[topic] = self.writer.add_connection(topic, msgtype, **kw)
 
     def write(self, topic: str, t_ns: int, data: bytes) -> None:

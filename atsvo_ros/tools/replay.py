@@ -10,7 +10,8 @@ deterministic, streaming (memory does not grow with the bag). Undecodable images
 out-of-order frames are skipped and counted (timing.json ``counters``, and a note each).
 Writes DIR/trajectory.tum (robot base pose, or the colour optical frame with ``--frame
 camera``), DIR/timing.json (per-frame tracking time, mode, status), DIR/metrics.json when ground
-truth is available (the bag's pose topic or ``--gt``), and PNG plots.
+truth is available (the bag's pose topic or ``--gt``), and PNG plots. ``--record OUT.mcap`` also
+writes the run as a ROS 2 bag for Foxglove, RViz and ``ros2 bag play`` (:mod:`atsvo_ros.io.record`).
 """
 from __future__ import annotations
 
@@ -50,6 +51,9 @@ class ReplayResult:
     notes: list[str] = field(default_factory=list)
     #: the full evaluation against ground truth (aligned poses, errors), when there was ground truth
     evaluation: Any = None
+    #: the bag written with ``record`` and its message count per topic
+    record_path: Path | None = None
+    record_counts: dict[str, int] = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -87,24 +91,32 @@ def slow_tracking_warning(tracking_time_s: np.ndarray, width: int, height: int, 
 def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, config: AtsvoConfig | None = None, *,
            mode: str | None = None, gt_path: str | Path | None = None, frame: str | None = None,
            topics: dict[str, str | None] | None = None, plots: bool = True, progress: bool | None = None,
-           odometry_factory: Callable[..., Any] | None = None, eval_options: Any = None) -> ReplayResult:
+           odometry_factory: Callable[..., Any] | None = None, eval_options: Any = None,
+           record: str | Path | None = None, force: bool = False) -> ReplayResult:
     """Replay a recording (bag, MVSEC HDF5 file, TUM folder) through the odometry runtime and write the outputs.
 
     ``config=None`` picks the preset from the recording (topics, or a TUM folder's name); ``mode``
     defaults to ``config.mode``; ``frame`` to the source's default (``base``; ``camera`` for a TUM
     folder, whose ground truth is the camera pose); ``odometry_factory(config, rgb_camera,
-    event_camera)`` defaults to the core's ``Odometry``. Raises :class:`TrackingError` (after writing
-    the outputs) when not a single frame could be tracked, saying why.
+    event_camera)`` defaults to the core's ``Odometry``. ``record`` names a ``.mcap`` file to write the
+    run to as a ROS 2 bag (:class:`~atsvo_ros.io.record.BagRecorder`; an existing one only with ``force``,
+    checked before the run). Raises :class:`TrackingError` (after writing the outputs) when not a single
+    frame could be tracked, saying why.
     """
     from tqdm import tqdm
 
     from atsvo_ros.config import load_config
+    from atsvo_ros.core.geometry import se3_inv
     from atsvo_ros.io.sources import detect_preset, open_source
     from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
     from atsvo_ros.runtime import OdometryRuntime
 
     if frame not in (None, "base", "camera"):
         raise ConfigError(f"--frame must be base or camera, got {frame!r}")
+    if record is not None:
+        from atsvo_ros.io.record import check_record_path
+
+        check_record_path(record, force)  # before the run, not after it
     out = Path(out_dir)
     notes: list[str] = []
     gt_file = read_tum(gt_path) if gt_path else None
@@ -112,6 +124,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     name = " + ".join(p.name for p in paths)
     source = open_source(paths, topics, config)
     log_lines: list[str] = []
+    recorder = None
     try:
         frame = frame or source.default_frame
         if config is None:
@@ -133,8 +146,12 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         def log(level: str, text: str) -> None:
             log_lines.append(f"{level}: {text}")
 
+        if record is not None:
+            from atsvo_ros.io.record import BagRecorder
+
+            recorder = BagRecorder(record, config, force=force).open()
         runtime = OdometryRuntime(config, rgb_cam, ev_cam, use_events=mode == "fused" and source.has("events"),
-                                  logger=log, core_factory=odometry_factory)
+                                  logger=log, core_factory=odometry_factory, sinks=(recorder,) if recorder else ())
         use_events = runtime.use_events
         if mode == "fused" and not use_events:
             notes.append("RGB-D only: the bag has no event topic")
@@ -142,7 +159,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         gt_samples: list | None = [] if gt_file is None and source.has("ground_truth") else None
         t_wall0 = time.perf_counter()
 
-        def record(batch: list) -> None:
+        def collect(batch: list) -> None:
             for o in batch:
                 outputs.append(o)
                 wall = time.perf_counter() - t_wall0
@@ -153,8 +170,8 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
 
         roles = ("rgb", "depth", "imu") + (("events",) if use_events else ())
         for _ in source.feed(runtime, roles, gt_samples):
-            record(runtime.poll())
-        record(runtime.flush())
+            collect(runtime.poll())
+        collect(runtime.flush())
         bar.close()
         wall = time.perf_counter() - t_wall0
         bag_duration = source.duration_s()
@@ -163,9 +180,22 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         read_stats, read_notes = source.read_problems()
         notes.extend(read_notes)
         notes.extend(_counter_notes(runtime))
+        record_counts: dict[str, int] = {}
+        if recorder is not None and outputs:
+            gt_rec = _ground_truth(gt_file, gt_samples)
+            if gt_rec is not None:  # the recorder wants the base pose; a camera ground truth is moved onto it
+                recorder.write_ground_truth(gt_rec if frame == "base" else
+                                            gt_rec.transformed(T_right=se3_inv(config.rig.T_base_rgb_matrix())))
+            record_counts = recorder.close()
+    except BaseException:
+        if recorder is not None:
+            recorder.abort()
+        raise
     finally:
         source.close()
     if not outputs:
+        if recorder is not None:
+            recorder.abort()
         first = runtime.first_problem.get("images_rejected")
         raise BagError(f"no colour/depth pair could be formed from {name} (sync tolerance "
                        f"{config.rig.sync_tolerance_s} s; dropped {sync_stats['dropped_rgb']} colour and "
@@ -178,7 +208,8 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     result = ReplayResult(out, used_mode, np.array([r.stamp_ns for r in results], np.int64),
                           np.stack([np.asarray(r.T_odom_base if frame == "base" else r.T_odom_camera, np.float64)
                                     for r in results]),
-                          statuses, np.array([r.tracking_time_s for r in results]), wall, bag_duration, notes=notes)
+                          statuses, np.array([r.tracking_time_s for r in results]), wall, bag_duration, notes=notes,
+                          record_path=Path(record) if record is not None else None, record_counts=record_counts)
     out.mkdir(parents=True, exist_ok=True)
     est = Trajectory(result.stamps_ns, result.T_odom_x)
     write_tum(out / "trajectory.tum", est, header=f"atsvo-replay {name} mode={used_mode} "
@@ -199,11 +230,11 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
               "mode_counts": {m: sum(r.mode == m for r in results) for m in sorted({r.mode for r in results})},
               "counters": dict(runtime.counters), "sync": sync_stats, "event_decoders": dec_stats,
               "bag_read": read_stats, "notes": notes, "log": log_lines[-200:], "frames": frames_info}
+    if record is not None:
+        timing["recording"] = {"path": str(record), "messages": record_counts}
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
-    gt = gt_file
-    if gt is None and gt_samples:
-        gt = Trajectory(np.asarray([g[0] for g in gt_samples], np.int64),
-                        np.stack([g[1] for g in gt_samples])).sorted_unique()
+    gt = _ground_truth(gt_file, gt_samples)
+    if gt_file is None and gt is not None:
         write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {name}")
     eval_result = None
     if gt is not None:
@@ -225,6 +256,18 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         raise TrackingError(f"not a single frame of {name} could be tracked ({len(results)} frames): {why}; "
                             f"outputs in {out}")
     return result
+
+
+def _ground_truth(gt_file: Any, gt_samples: list | None) -> Any:
+    """The ground truth: the ``--gt`` file, else the bag's pose samples (a Trajectory), else None."""
+    from atsvo_ros.io.trajectory import Trajectory
+
+    if gt_file is not None:
+        return gt_file
+    if not gt_samples:
+        return None
+    return Trajectory(np.asarray([g[0] for g in gt_samples], np.int64),
+                      np.stack([g[1] for g in gt_samples])).sorted_unique()
 
 
 def _counter_notes(runtime: Any) -> list[str]:
@@ -250,7 +293,8 @@ def _main(args: argparse.Namespace) -> int:
     topics = {r: getattr(args, f"{r}_topic") for r in TOPIC_FLAGS}
     res = replay(args.bag, args.out, config, mode=args.mode, gt_path=args.gt, frame=args.frame, topics=topics,
                  plots=not args.no_plots, progress=False if args.no_progress else None,
-                 eval_options=EvalOptions(align=args.align, align_s=args.align_s, interpolate_gt=not args.nearest_gt))
+                 eval_options=EvalOptions(align=args.align, align_s=args.align_s, interpolate_gt=not args.nearest_gt),
+                 record=args.record, force=args.force)
     for note in res.notes:
         if note.startswith("warning: "):
             print(f"atsvo-replay: {note}", file=sys.stderr)
@@ -261,6 +305,11 @@ def _main(args: argparse.Namespace) -> int:
     if res.metrics:
         print(format_metrics(res.metrics))
     print(f"wrote {Path(args.out) / 'trajectory.tum'}")
+    if res.record_path is not None:
+        from atsvo_ros.config import config_dir
+
+        print(f"wrote {res.record_path} ({sum(res.record_counts.values())} messages on {len(res.record_counts)} "
+              f"topics; Foxglove layout: {config_dir() / 'foxglove_layout.json'})")
     return 0
 
 
@@ -289,6 +338,10 @@ def build_parser() -> argparse.ArgumentParser:
     for role in TOPIC_FLAGS:
         parser.add_argument(f"--{role.replace('_', '-')}-topic", dest=f"{role}_topic", metavar="TOPIC",
                             help=f"{role.replace('_', ' ')} topic (default: auto-detected)")
+    parser.add_argument("--record", metavar="OUT.mcap",
+                        help="also write the run as a ROS 2 bag (mcap): odometry, path, TF, map cloud, debug images, "
+                             "ground truth; for Foxglove (config/foxglove_layout.json), RViz and ros2 bag play")
+    parser.add_argument("--force", action="store_true", help="replace an existing --record file")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser

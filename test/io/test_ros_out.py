@@ -54,3 +54,22 @@ def test_body_twist_of_a_known_motion():
     v = body_twist(T0, T1, dt)
     assert np.allclose(v, [1.0, 0, 0, 0, 0, 0.5], atol=1e-2)
     assert np.allclose(body_twist(T0, T1, 0.0), 0.0)
+
+
+def test_map_cloud_of_a_snapshot_is_in_odom_and_coloured_by_the_patch_centre():
+    from atsvo_ros.core.map import MapSnapshot
+    from atsvo_ros.io.ros_out import MAP_CLOUD_FIELDS, MAP_CLOUD_POINT_STEP, map_cloud_from_snapshot
+
+    points_w = np.array([[0.0, 0.0, 1.0], [0.5, -0.2, 2.0], [-1.0, 0.3, 3.5]])
+    patches = np.arange(2 * 3 * 8, dtype=np.float32).reshape(2, 3, 8)
+    snap = MapSnapshot(7, points_w, patches, points_w[:, 2].copy(), np.zeros(3, np.int32), np.zeros((0, 3)), (), 3, 9)
+    T_odom_world = pose_from_tq(np.array([0.2, 0.0, 0.1]), np.array([0.5, -0.5, 0.5, -0.5]))
+    cloud = map_cloud_from_snapshot(snap, T_odom_world)
+    assert cloud.dtype == np.dtype("<f4") and cloud.shape == (3, 4)
+    expected = (T_odom_world[:3, :3] @ points_w.T).T + T_odom_world[:3, 3]
+    np.testing.assert_allclose(cloud[:, :3], expected, atol=1e-6)
+    np.testing.assert_array_equal(cloud[:, 3], patches[0, :, 0])
+    # the byte layout the PointCloud2 fields describe: x y z intensity, float32, 16 bytes a point
+    assert [f[:2] for f in MAP_CLOUD_FIELDS] == [("x", 0), ("y", 4), ("z", 8), ("intensity", 12)]
+    assert cloud[0].nbytes == MAP_CLOUD_POINT_STEP
+    assert map_cloud_from_snapshot(MapSnapshot.empty(2, 8), np.eye(4)).shape == (0, 4)
