@@ -47,6 +47,7 @@ from atsvo_ros.mapping_remote import RemoteMapping, mapping_digest
 from atsvo_ros.nodes._params import declare_config
 from atsvo_ros.nodes._ros import (
     ERROR,
+    IMAGE_QOS,
     LATCHED_QOS,
     OK,
     OUTPUT_QOS,
@@ -121,8 +122,8 @@ class TrackingNode(Node):
         # ---- inputs: one callback at a time (pairing state), never blocked by the worker
         sensors = MutuallyExclusiveCallbackGroup()
         self._control_group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Image, topics.rgb, self._on_rgb, SENSOR_QOS, callback_group=sensors)
-        self.create_subscription(Image, topics.depth, self._on_depth, SENSOR_QOS, callback_group=sensors)
+        self.create_subscription(Image, topics.rgb, self._on_rgb, IMAGE_QOS, callback_group=sensors)
+        self.create_subscription(Image, topics.depth, self._on_depth, IMAGE_QOS, callback_group=sensors)
         self.create_subscription(CameraInfo, topics.rgb_info, self._on_rgb_info, SENSOR_QOS, callback_group=sensors)
         if use_events:
             self.create_subscription(CameraInfo, topics.event_info, self._on_event_info, SENSOR_QOS,
@@ -148,6 +149,7 @@ class TrackingNode(Node):
         self.tracking_ms, self.latency_ms, self.stamp_latency_ms = Window(), Window(), Window()
         self.worker_ms = Window()  # per frame: odometry + keyframe request + publishing (what bounds the rate)
         self.frames_in = self.frames_out = self.bad_snapshots = 0
+        self.rgb_received = self.depth_received = 0  # messages taken from DDS (what a transport loss lowers)
         self._drops_reported = 0
         self.last: RuntimeOutput | None = None
         self.create_timer(nc.diagnostics_period_s, self._publish_diagnostics, callback_group=self._control_group)
@@ -203,11 +205,13 @@ class TrackingNode(Node):
 
     def _on_rgb(self, msg: Image) -> None:
         self.rates.add("rgb")
+        self.rgb_received += 1
         self.runtime.add_rgb_msg(msg, self.config.topics.rgb)
         self._pump()
 
     def _on_depth(self, msg: Image) -> None:
         self.rates.add("depth")
+        self.depth_received += 1
         self.runtime.add_depth_msg(msg, self.config.topics.depth)
         self._pump()
 
@@ -330,6 +334,7 @@ class TrackingNode(Node):
             "worker_ms_p50": self.worker_ms.percentile(50), "worker_ms_mean": self.worker_ms.mean(),
             "latency_ms_p50": self.latency_ms.percentile(50), "latency_ms_p99": self.latency_ms.percentile(99),
             "stamp_to_odometry_ms_p50": self.stamp_latency_ms.percentile(50),
+            "rgb_received": self.rgb_received, "depth_received": self.depth_received,
             "frames_in": self.frames_in, "frames_out": self.frames_out, "frames_waiting": rt.frames_waiting,
             "queue_drops": self.queue.n_dropped,
             "queue_length": len(self.queue), "queue_size": self.queue.maxsize,

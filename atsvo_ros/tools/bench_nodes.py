@@ -8,7 +8,7 @@ frame rate. Then the sequence is published at 1x and 3x that frame rate (the who
 images and IMU, and the events re-cut into packets that still go out every millisecond, as a driver
 sends them). Per run: latency from a frame's stamp (the time it was due on the publishing
 clock) to its odometry at the subscriber, p50/p99/max; frames dropped by the node's queue (counted),
-by DDS (published but never paired) and still waiting; the node processes' resident memory over time
+by DDS (published, never received) and still waiting; the node processes' resident memory over time
 (first, last, max, and the slope over the second half). Needs the ``ros`` extra and the event messages
 (.ci/ros_env.sh); the simulated sequence is cached in ``$ATSVO_CACHE``.
 """
@@ -127,8 +127,8 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path) -> dic
         "latency_ms_p50": float(np.percentile(lat, 50)) if len(lat) else None,
         "latency_ms_p99": float(np.percentile(lat, 99)) if len(lat) else None,
         "latency_ms_max": float(lat.max()) if len(lat) else None,
-        "queue_drops": int(diag.get("queue_drops", 0)), "dds_lost_frames": n_frames - frames_in -
-        int(diag.get("sync_dropped_rgb", 0)) - int(diag.get("frames_waiting", 0)),
+        "queue_drops": int(diag.get("queue_drops", 0)),
+        "dds_lost_frames": n_frames - int(diag.get("rgb_received", frames_in)),
         "sync_dropped": int(diag.get("sync_dropped_rgb", 0)), "frames_waiting": int(diag.get("frames_waiting", 0)),
         "event_msgs_decoded": int(diag.get("count_event_msgs", 0)),
         "event_msgs_published": played.n_event_msgs,

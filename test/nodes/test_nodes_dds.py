@@ -150,9 +150,19 @@ def _check_common(run: Run) -> None:
     d = run.diag
     assert d is not None, "no diagnostics from the tracking node"
     n_frames = len(run.played.frame_stamps_ns)
+    received = set(run.stamps.tolist())
+    missing = [i for i, s in enumerate(run.played.frame_stamps_ns) if s not in received]
+    why = (f"{len(run.stamps)} odometry, {n_frames} frames, none for frames {missing}; player late by up to "
+           f"{max(run.played.lag_s):.3f} s; {json.dumps(d, sort_keys=True)}")
+    # every frame reached the node under the shipped QoS and DDS profile (a transport loss is not counted)
+    assert int(d["rgb_received"]) == int(d["depth_received"]) == n_frames, why
     accounted = (len(run.stamps) + int(d["queue_drops"]) + int(d["sync_dropped_rgb"]) + int(d["frames_waiting"])
-                 + int(d.get("count_frames_duplicate", 0)) + int(d.get("count_frames_out_of_order", 0)))
-    assert accounted == n_frames, (len(run.stamps), n_frames, d)
+                 + sum(int(d.get(f"count_{k}", 0)) for k in ("frames_duplicate", "frames_out_of_order",
+                                                            "frames_dropped_waiting_camera_info")))
+    assert accounted == n_frames, why
+    # what the issue asks /diagnostics to carry: mode, status, tracking time, queue and decoder drops, rates
+    assert {"mode", "status", "tracking_time_ms_p50", "queue_drops", "decoder_drops", "rate_rgb_hz",
+            "rate_event_msgs_hz", "rate_odometry_hz"} <= set(d) and d["mode"] in ("fused", "rgbd"), d
     assert int(d["frames_waiting"]) <= 1  # at most the last frame, whose events never got completed
     assert len(run.statuses) == len(run.stamps) and run.probe.maps, "per-frame status or map missing"
     cloud = run.probe.maps[-1]
