@@ -3,7 +3,7 @@
 QoS (documented in the README): sensor inputs use ROS's sensor-data profile (best effort, volatile;
 images keep the last 10, events and IMU the last 200), which matches both best-effort and reliable publishers
 (realsense2_camera and ``ros2 bag play`` publish reliable); camera-sized images between processes
-need the Fast DDS profile ``config/fastdds_shm.xml`` (16 MiB shared memory) in *both* processes, or
+need the Fast DDS profile ``config/fastdds_shm.xml`` (64 MiB shared memory) in *both* processes, or
 a best-effort reader loses most frames. Outputs (odometry, status) are reliable keep-last 10, the
 map and the mapping snapshots reliable + transient local (a late subscriber gets the latest),
 keyframe requests reliable keep-last 8.
@@ -28,15 +28,16 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from atsvo_ros.errors import AtsvoError
 
 SENSOR_QOS = qos_profile_sensor_data
-#: Image inputs: sensor-data QoS with a reader history of 10 (1/3 s at 30 Hz) instead of 5. A Python executor
-#: stalled for a few frames (GIL, a loaded machine) catches up from the history and the frames too many are
+#: Image inputs: sensor-data QoS with a reader history of 30 (1 s at 30 Hz) instead of 5. A Python executor
+#: stalled for a few frames (GIL, a loaded machine: 6 frames in a row were lost with 10 on a busy CI run)
+#: catches up from the history and the frames too many are
 #: dropped, counted, by the node's drop-oldest queue; a full DDS history overwrites its oldest sample without
 #: any notice (Fast DDS raises no message-lost event for it), so those frames would vanish uncounted.
-IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=30, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
-#: The same for the fast streams (events ~1 kHz packets, IMU 200-400 Hz): a deeper reader history, so a
-#: callback that waits a few milliseconds for the GIL does not lose packets.
-STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
+#: The same for the fast streams (events ~1 kHz packets, IMU 200-400 Hz): 1 s of reader history, so a
+#: callback that waits for the GIL does not lose packets.
+STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE)
 OUTPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,

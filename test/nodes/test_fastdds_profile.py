@@ -1,4 +1,4 @@
-"""config/fastdds_shm.xml: a valid Fast DDS profile that gives each process a 16 MiB shared-memory segment."""
+"""config/fastdds_shm.xml: a valid Fast DDS profile that gives each process a 64 MiB shared-memory segment."""
 from __future__ import annotations
 
 import os
