@@ -15,6 +15,7 @@ import signal
 import subprocess
 import threading
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -182,6 +183,14 @@ def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
     """mapping.synchronous + a queue that never drops: the node's odometry is the replay's, pose for pose."""
     _, replay, *_ = sequence
     run = _run(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"])
+    n_frames = len(run.played.frame_stamps_ns)
+    if min(int(run.diag["rgb_received"]), int(run.diag["depth_received"])) < n_frames:
+        # The comparison holds only when every frame arrived. On a starved machine (the in-test player
+        # measured up to 1.1 s late) best-effort DDS can lose a burst of frames before the node sees
+        # them (no loss event exists for it); that is the transport, not the node: run once more.
+        warnings.warn(f"DDS lost frames ({run.diag['rgb_received']} of {n_frames} colour images arrived); "
+                      "running the synchronous comparison once more", stacklevel=2)
+        run = _run(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"])
     _check_common(run)
     d = run.diag
     assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
