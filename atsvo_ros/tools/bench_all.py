@@ -28,7 +28,6 @@ import datetime
 import json
 import os
 import platform
-import resource
 import shutil
 import sys
 import time
@@ -115,13 +114,14 @@ def _accuracy_run(scenario: str, seed: int, duration_s: float, mode: str) -> dic
 def _replay_child(bag: str, out: str, mode: str) -> dict[str, Any]:
     """One replay in a fresh process: its figures, its evaluation and the process's peak memory."""
     from atsvo_ros.config import load_config
+    from atsvo_ros.tools.bench_longrun import peak_rss_mb
     from atsvo_ros.tools.replay import replay
 
     t0 = time.perf_counter()
     res = replay(Path(bag), Path(out), load_config("synthetic"), mode=mode, plots=False, progress=False)
     tt = res.tracking_time_s * 1e3
     return {"mode": res.mode, "bag": bag, "wall_s": time.perf_counter() - t0, "rtf": res.real_time_factor,
-            "frames": len(res.stamps_ns), "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "frames": len(res.stamps_ns), "peak_rss_mb": peak_rss_mb(),
             "track_ms_median": float(np.median(tt)), "track_ms_p95": float(np.percentile(tt, 95)),
             "metrics": res.metrics, "statuses": dict(Counter(res.statuses)), "evaluation": res.evaluation}
 

@@ -30,20 +30,30 @@ from atsvo_ros.tools._cli import add_config_args, parse_overrides
 MINUTE_NS = 60_000_000_000
 
 
-def rss_mb() -> float:
-    """Resident set size of this process in MiB (``/proc/self/status``; peak RSS where that is missing)."""
+def _proc_status_mb(key: str) -> float | None:
     try:
         for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
+            if line.startswith(key):
                 return int(line.split()[1]) / 1024.0
     except OSError:
         pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return None
+
+
+def rss_mb() -> float:
+    """Resident set size of this process in MiB (``/proc/self/status``; peak RSS where that is missing)."""
+    now = _proc_status_mb("VmRSS:")
+    return now if now is not None else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def peak_rss_mb() -> float:
-    """Peak resident set size of this process in MiB (Linux reports KiB)."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    """Peak resident set size of this process in MiB.
+
+    ``VmHWM`` of this address space where Linux has it: ``ru_maxrss`` survives ``execve``, so a process
+    spawned from a big parent would report the parent's peak (every spawned replay showed the same 2180 MiB).
+    """
+    peak = _proc_status_mb("VmHWM:")
+    return peak if peak is not None else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _segment_dir(spec: Any) -> Path:
