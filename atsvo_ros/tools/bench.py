@@ -18,7 +18,7 @@ SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
                  "tracking time per frame and accuracy on synthetic legged-robot sequences (RGB-D, --events: fused)"),
     "longrun": ("atsvo_ros.tools.bench_longrun", "add_longrun_args", "main_longrun",
                 "memory (RSS per minute) and latency over a long synthetic run: is anything growing?"),
-    "nodes": ("atsvo_ros.tools.bench_nodes", "add_nodes_args", "main_nodes",
+    "nodes": ("atsvo_ros.nodes.bench_nodes", "add_nodes_args", "main_nodes",
               "ROS nodes over loopback DDS: frame-stamp-to-odometry latency, drops and memory at 1x / 3x the "
               "sustainable frame rate"),
     "real": ("atsvo_ros.tools.bench_real", "add_real_args", "main_real",

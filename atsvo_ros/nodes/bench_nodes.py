@@ -1,5 +1,7 @@
 """``atsvo-bench nodes``: latency, drops and memory of the ROS nodes under load, over loopback DDS.
 
+Lives in atsvo_ros.nodes, the only package that imports rclpy.
+
 Starts the nodes as a user does (``atsvo_node``, or ``tracking_node`` + ``mapping_node`` with
 ``--split``), publishes a synthetic sequence message by message (sensor-data QoS) and subscribes to
 the odometry like a controller. A first run at the recording's own rate measures how long the node
