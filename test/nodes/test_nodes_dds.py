@@ -118,6 +118,29 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
     return Run(played, probe, stamps, poses, diag, statuses, reset_ok, codes, logs)
 
 
+def _delivered(run: Run) -> bool:
+    """Every published frame reached the node (``rgb_received``/``depth_received``), the reset replay too."""
+    n = len(run.played.frame_stamps_ns)
+    if run.diag is None:
+        return True  # nothing to tell; _check_common reports the missing diagnostics
+    return min(int(run.diag["rgb_received"]), int(run.diag["depth_received"])) >= n and run.reset_ok is not False
+
+
+def _run_delivered(sequence, scripts: list[str], **kwargs) -> Run:
+    """:func:`_run`, once more when best-effort DDS lost frames before the node saw them.
+
+    The checks count on every frame arriving. On a starved machine (the in-test player measured up to
+    1.1 s late, in 2 of ~6 CI runs) best-effort DDS loses bursts of frames that no loss event reports;
+    that is the transport, not the node, so such a run is repeated once (with a warning), never more.
+    """
+    run = _run(sequence, scripts, **kwargs)
+    if not _delivered(run):
+        warnings.warn(f"DDS lost frames ({run.diag['rgb_received']} of {len(run.played.frame_stamps_ns)} colour "
+                      f"images arrived, reset replay complete: {run.reset_ok}); running once more", stacklevel=2)
+        run = _run(sequence, scripts, **kwargs)
+    return run
+
+
 def _check_reset(player: BagPlayer, probe: OdometryProbe) -> bool:
     """Reset, replay the first second: the odometry starts over at the identity, initialising, then tracks."""
     response = probe.reset()
@@ -130,7 +153,8 @@ def _check_reset(player: BagPlayer, probe: OdometryProbe) -> bool:
     stamps, poses = probe.poses(since=n0)
     statuses = [s.status[0].message for s in probe.status[n0:]]
     # the frame the first run left waiting goes first (at the identity of the new start), then the replayed ones
-    assert len(stamps) >= len(played.frame_stamps_ns) - 1, (len(stamps), len(played.frame_stamps_ns))
+    if len(stamps) < len(played.frame_stamps_ns) - 1:
+        return False  # frames lost on the way (see _run_delivered); the caller repeats the run once
     assert np.allclose(poses[0], np.eye(4)) and statuses[0] == "initialising", (poses[0], statuses[:3])
     assert statuses[-1] == "ok" and np.linalg.norm(poses[-1][:3, 3]) > 0.05  # tracking again, and moving
     return True
@@ -182,15 +206,7 @@ def _ate(run: Run, gt: Trajectory) -> float:
 def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
     """mapping.synchronous + a queue that never drops: the node's odometry is the replay's, pose for pose."""
     _, replay, *_ = sequence
-    run = _run(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"])
-    n_frames = len(run.played.frame_stamps_ns)
-    if min(int(run.diag["rgb_received"]), int(run.diag["depth_received"])) < n_frames:
-        # The comparison holds only when every frame arrived. On a starved machine (the in-test player
-        # measured up to 1.1 s late) best-effort DDS can lose a burst of frames before the node sees
-        # them (no loss event exists for it); that is the transport, not the node: run once more.
-        warnings.warn(f"DDS lost frames ({run.diag['rgb_received']} of {n_frames} colour images arrived); "
-                      "running the synchronous comparison once more", stacklevel=2)
-        run = _run(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"])
+    run = _run_delivered(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"])
     _check_common(run)
     d = run.diag
     assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
@@ -208,7 +224,7 @@ def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
 def test_asynchronous_nodes_are_as_accurate_as_the_replay(sequence, scripts):
     """The default (PTAM: tracking goes on while mapping works): ATE within 50 % or 5 mm of the replay's."""
     _, _, metrics, gt, _ = sequence
-    run = _run(sequence, scripts, synchronous=False, queue_size=2, debug_images=scripts == ["atsvo_node"])
+    run = _run_delivered(sequence, scripts, synchronous=False, queue_size=2, debug_images=scripts == ["atsvo_node"])
     _check_common(run)
     if scripts == ["atsvo_node"]:  # someone subscribes to the debug images: they come, one per frame or so
         ats, sel = run.probe.debug["ats"], run.probe.debug["selection"]
