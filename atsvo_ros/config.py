@@ -305,6 +305,11 @@ class NodeConfig:
                              doc="message type on topics.events (libcaer_driver: EventPacket)")
     queue_size: int = _f(2, 1, 100, doc="frames waiting for the tracker; when full the oldest is dropped (counted) "
                          "and its events and IMU samples go to the next, so the odometry stays fresh")
+    sensor_qos: str = _f("best_effort", choices=("best_effort", "reliable"),
+                         doc="QoS of the image, event and IMU subscriptions: best_effort (sensor data, keep last: "
+                             "matches any publisher, a late message is dropped, never waited for; the robot) or "
+                             "reliable (reliable, keep all: every message of a reliable publisher arrives, a slow "
+                             "node slows the publisher down; replaying a bag where every frame must count)")
     use_imu: bool = _f(True, doc="feed topics.imu's gyro to the motion prediction")
     publish_tf: bool = _f(True, doc="broadcast odom -> base_link on /tf")
     diagnostics_period_s: float = _f(1.0, 0.0, 3600.0, lo_open=True, doc="period of /diagnostics")

@@ -39,11 +39,27 @@ IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=30, reliability=Re
 #: callback that waits for the GIL does not lose packets.
 STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE)
+#: ``node.sensor_qos: reliable``: every message of a reliable publisher arrives. Keep-all on both ends, so a
+#: reader that falls behind holds back its acknowledgements and the writer waits (lossless back-pressure)
+#: where keep-last would overwrite unread samples.
+RELIABLE_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.VOLATILE)
 OUTPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 REQUEST_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=8, reliability=ReliabilityPolicy.RELIABLE)
 TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+
+def input_qos(sensor_qos: str, best_effort: QoSProfile) -> QoSProfile:
+    """The QoS of a sensor subscription under ``node.sensor_qos`` (``best_effort`` -> the given profile)."""
+    if sensor_qos == "reliable":
+        return RELIABLE_INPUT_QOS
+    if sensor_qos == "best_effort":
+        return best_effort
+    raise ValueError(f"node.sensor_qos must be best_effort or reliable, got {sensor_qos!r}")
+
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 

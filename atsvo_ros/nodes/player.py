@@ -25,7 +25,7 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from atsvo_ros.nodes._ros import LATCHED_QOS, OUTPUT_QOS, SENSOR_QOS
+from atsvo_ros.nodes._ros import LATCHED_QOS, OUTPUT_QOS, RELIABLE_INPUT_QOS, SENSOR_QOS
 
 
 def message_class(msgtype: str) -> Any:
@@ -50,7 +50,8 @@ class BagPlayer:
     """Publishes a ROS 2 bag's messages on their topics (see the module docstring)."""
 
     def __init__(self, node: Node, bag: str | Path, topics: Iterable[str], rgb_topic: str, depth_topic: str,
-                 events_topic: str | None = None) -> None:
+                 events_topic: str | None = None, reliable: bool = False) -> None:
+        """``reliable``: publish reliable keep-all (like ``ros2 bag play``) instead of sensor-data QoS."""
         from rosbags.highlevel import AnyReader
 
         from atsvo_ros.io.msgtypes import register_event_types
@@ -62,12 +63,13 @@ class BagPlayer:
         wanted = set(topics)
         self.messages: list[tuple[int, str, bytes, int | None]] = []  # (log time, topic, cdr, header stamp)
         self.publishers: dict[str, Any] = {}
+        qos = RELIABLE_INPUT_QOS if reliable else SENSOR_QOS
         with AnyReader([Path(bag)]) as reader:
             register_event_types(reader.typestore, 2)
             conns = [c for c in reader.connections if c.topic in wanted]
             for c in conns:
                 if c.topic not in self.publishers:
-                    self.publishers[c.topic] = node.create_publisher(message_class(c.msgtype), c.topic, SENSOR_QOS)
+                    self.publishers[c.topic] = node.create_publisher(message_class(c.msgtype), c.topic, qos)
             for c in conns:
                 if c.topic == events_topic:
                     self._events_msgtype = c.msgtype

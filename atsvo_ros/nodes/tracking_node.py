@@ -60,6 +60,7 @@ from atsvo_ros.nodes._ros import (
     Window,
     diagnostic_array,
     event_message_class,
+    input_qos,
     run_nodes,
     stamp_msg,
     uint8_array,
@@ -121,18 +122,20 @@ class TrackingNode(Node):
 
         # ---- inputs: one callback at a time (pairing state), never blocked by the worker
         sensors = MutuallyExclusiveCallbackGroup()
+        image_qos, stream_qos = input_qos(nc.sensor_qos, IMAGE_QOS), input_qos(nc.sensor_qos, STREAM_QOS)
         self._control_group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Image, topics.rgb, self._on_rgb, IMAGE_QOS, callback_group=sensors)
-        self.create_subscription(Image, topics.depth, self._on_depth, IMAGE_QOS, callback_group=sensors)
+        self.create_subscription(Image, topics.rgb, self._on_rgb, image_qos, callback_group=sensors)
+        self.create_subscription(Image, topics.depth, self._on_depth, image_qos, callback_group=sensors)
         self.create_subscription(CameraInfo, topics.rgb_info, self._on_rgb_info, SENSOR_QOS, callback_group=sensors)
         if use_events:
             self.create_subscription(CameraInfo, topics.event_info, self._on_event_info, SENSOR_QOS,
                                      callback_group=sensors)
             # raw=True: the callback gets the CDR bytes, decoded with numpy (no Python object per event)
-            self.create_subscription(self.event_class, topics.events, self._on_events, STREAM_QOS, raw=True,
+            self.create_subscription(self.event_class, topics.events, self._on_events,
+                                     stream_qos, raw=True,
                                      callback_group=sensors)
         if nc.use_imu:
-            self.create_subscription(Imu, topics.imu, self._on_imu, STREAM_QOS, callback_group=sensors)
+            self.create_subscription(Imu, topics.imu, self._on_imu, stream_qos, callback_group=sensors)
         self.create_service(Trigger, topics.reset_service, self._on_reset, callback_group=self._control_group)
 
         # ---- mapping over topics
@@ -159,7 +162,7 @@ class TrackingNode(Node):
                  f"{', synchronous' if cfg.mapping.synchronous else ''}; in: {topics.rgb}, {topics.depth}"
                  f"{', ' + topics.events + ' (' + nc.event_msg_type + ')' if use_events else ''}"
                  f"{', ' + topics.imu if nc.use_imu else ''}; out: {topics.odometry}, {topics.status}, "
-                 f"TF {self.tf_route}; queue {nc.queue_size} (drop oldest)")
+                 f"TF {self.tf_route}; queue {nc.queue_size} (drop oldest); sensor QoS {nc.sensor_qos}")
 
     # ------------------------------------------------------------------ setup helpers
     def _tf_publisher(self) -> tuple[Callable[[Any], None] | None, str]:

@@ -1,7 +1,10 @@
 """The nodes as a user runs them (console scripts in subprocesses), fed over loopback DDS at the sequence's rate.
 
-A synthetic trot is published message by message (the recorded bytes, sensor-data QoS, real time)
-under the Fast DDS profile config/fastdds_shm.xml (.ci/ros_env.sh exports it); a probe subscribes to
+A synthetic trot is published message by message (the recorded bytes, real time) under the Fast DDS
+profile config/fastdds_shm.xml (.ci/ros_env.sh exports it): with sensor-data QoS (the default,
+best effort: a starved machine may lose frames on the way, the node answers for those it got) and,
+for the pose-for-pose comparison, reliable keep-all on both ends (``node.sensor_qos: reliable``,
+``ros2 bag play``'s QoS: every frame arrives, whatever the load); a probe subscribes to
 the odometry like a controller. Checked: one odometry per frame (minus what the node counts as
 dropped or still waiting), poses equal to ``atsvo-replay`` with ``mapping.synchronous``, ATE close to
 the replay's without it, the map, the per-frame status and /diagnostics arrive, the reset service
@@ -71,22 +74,25 @@ class Run:
     reset_ok: bool | None
     exit_codes: list[int]
     logs: list[str]
+    reliable: bool  # node.sensor_qos reliable and a reliable player: nothing may be lost on the way
 
 
 def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check_reset: bool = False,
-         debug_images: bool = False) -> Run:
+         debug_images: bool = False, reliable: bool = False) -> Run:
     bag, *_, base = sequence
     cfg = load_config("synthetic")
     t = cfg.topics
     args = ["--ros-args", "--params-file", str(PARAMS), "-p", f"mapping.synchronous:={str(synchronous).lower()}",
-            "-p", f"node.queue_size:={queue_size}", "-p", "node.diagnostics_period_s:=0.25"]
+            "-p", f"node.queue_size:={queue_size}", "-p", "node.diagnostics_period_s:=0.25",
+            "-p", f"node.sensor_qos:={'reliable' if reliable else 'best_effort'}"]
     procs = NodeProcesses(scripts, args, base / "logs")
     context = Context()
     rclpy.init(context=context)
     executor = None
     try:
         node = rclpy.create_node("atsvo_test_probe", context=context)
-        player = BagPlayer(node, bag, [t.rgb, t.depth, t.rgb_info, t.event_info, t.events, t.imu], t.rgb, t.depth)
+        player = BagPlayer(node, bag, [t.rgb, t.depth, t.rgb_info, t.event_info, t.events, t.imu], t.rgb, t.depth,
+                           reliable=reliable)
         probe = OdometryProbe(node, cfg, debug_images=debug_images)
         executor = MultiThreadedExecutor(num_threads=2, context=context)
         executor.add_node(node)
@@ -115,7 +121,7 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
             executor.shutdown(timeout_sec=2.0)
         rclpy.try_shutdown(context=context)
     logs = [Path(log).read_text() for log in procs.logs]
-    return Run(played, probe, stamps, poses, diag, statuses, reset_ok, codes, logs)
+    return Run(played, probe, stamps, poses, diag, statuses, reset_ok, codes, logs, reliable)
 
 
 def _delivered(run: Run) -> bool:
@@ -179,12 +185,15 @@ def _check_common(run: Run) -> None:
     missing = [i for i, s in enumerate(run.played.frame_stamps_ns) if s not in received]
     why = (f"{len(run.stamps)} odometry, {n_frames} frames, none for frames {missing}; player late by up to "
            f"{max(run.played.lag_s):.3f} s; {json.dumps(d, sort_keys=True)}")
-    # every frame reached the node under the shipped QoS and DDS profile (a transport loss is not counted)
-    assert int(d["rgb_received"]) == int(d["depth_received"]) == n_frames, why
+    received = int(d["rgb_received"])
+    if run.reliable:  # reliable keep-all end to end: every frame reaches the node, whatever the machine's load
+        assert received == int(d["depth_received"]) == n_frames, why
+    elif received < n_frames:  # best effort may lose frames on a starved machine; the node answers for the rest
+        warnings.warn(f"best-effort DDS lost {n_frames - received} of {n_frames} frames before the node", stacklevel=2)
     accounted = (len(run.stamps) + int(d["queue_drops"]) + int(d["sync_dropped_rgb"]) + int(d["frames_waiting"])
                  + sum(int(d.get(f"count_{k}", 0)) for k in ("frames_duplicate", "frames_out_of_order",
                                                             "frames_dropped_waiting_camera_info")))
-    assert accounted == n_frames, why
+    assert accounted == received, why
     # what the issue asks /diagnostics to carry: mode, status, tracking time, queue and decoder drops, rates
     assert {"mode", "status", "tracking_time_ms_p50", "queue_drops", "decoder_drops", "rate_rgb_hz",
             "rate_event_msgs_hz", "rate_odometry_hz"} <= set(d) and d["mode"] in ("fused", "rgbd"), d
@@ -206,7 +215,8 @@ def _ate(run: Run, gt: Trajectory) -> float:
 def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
     """mapping.synchronous + a queue that never drops: the node's odometry is the replay's, pose for pose."""
     _, replay, *_ = sequence
-    run = _run_delivered(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"])
+    run = _run(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"],
+               reliable=True)
     _check_common(run)
     d = run.diag
     assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
