@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from atsvo_ros.config import AtsvoConfig, flatten
 from atsvo_ros.core.map import MapSnapshot, TemporaryEventMap
 from atsvo_ros.core.mapper import EventMapRequest, KeyframeRequest, Mapper
+from atsvo_ros.core.mapping_port import EventMapBuilder
 from atsvo_ros.io.wire import (
     PinholeLevels,
     decode_keyframe_request,
@@ -56,7 +57,8 @@ class RemoteMapping:
     def __init__(self, mapper: Mapper, send: Callable[[bytes], None], connected: Callable[[], bool], *,
                  synchronous: bool = False, timeout_s: float = 5.0, config_digest: str = "",
                  logger: Logger | None = None) -> None:
-        self.mapper = mapper  # builds the event maps here; its own map stays empty
+        self.mapper = mapper  # builds the event maps here (on a helper thread); its own map stays empty
+        self._event_maps = EventMapBuilder(mapper, background=True)
         self.session = uuid.uuid4().hex[:12]
         self.synchronous = bool(synchronous)
         self.timeout_s = float(timeout_s)
@@ -110,7 +112,10 @@ class RemoteMapping:
             return ready
 
     def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
-        return self.mapper.build_event_map(request)
+        return self._event_maps.get(request)
+
+    def prepare_event_map(self, request: EventMapRequest) -> None:
+        self._event_maps.prepare(request)
 
     def latest(self) -> MapSnapshot | None:
         with self._cond:
@@ -131,6 +136,7 @@ class RemoteMapping:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
+        self._event_maps.close()
 
     # ------------------------------------------------------------------ answers
     def on_message(self, payload: bytes | bytearray | memoryview) -> bool:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.config import AtsvoConfig, EventSelectionConfig
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.frontend import ImageFrontEnd
@@ -130,9 +130,16 @@ class EventFrontEnd:
 
     def select(self, frame: EventFrame) -> EventFrame:
         """``frame`` with the pixels of Section II-B (Eq. 3) on its surface, from the recent events."""
-        fired = self.recent_pixels(frame.stamp_ns)
-        sel = select_event_pixels(frame.surface, fired, frame.stamp_ns, self._window_ns, self.config.event_selection)
-        return dataclasses.replace(frame, selected=sel, n_events=int(np.count_nonzero(fired)))
+        return select_event_frame(frame, self.recent_pixels(frame.stamp_ns), self.config.event_selection)
 
 
-__all__ = ["EventFrame", "EventFrontEnd"]
+def select_event_frame(frame: EventFrame, fired: np.ndarray, cfg: EventSelectionConfig) -> EventFrame:
+    """``frame`` with the pixels of Section II-B (Eq. 3) selected among ``fired`` (pixels of the window's events).
+
+    A pure function of its arguments, so mapping can run it in a thread of its own.
+    """
+    sel = select_event_pixels(frame.surface, fired, frame.stamp_ns, 0, cfg)
+    return dataclasses.replace(frame, selected=sel, n_events=int(np.count_nonzero(fired)))
+
+
+__all__ = ["EventFrame", "EventFrontEnd", "select_event_frame"]

@@ -18,39 +18,54 @@ from atsvo_ros.core.map import TemporaryEventMap, extract_patches
 from atsvo_ros.core.photometric import ATS_PATTERN
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _zbuffer(depth, fx, fy, cx, cy, T, efx, efy, ecx, ecy, out):  # pragma: no cover - compiled
-    """Scatter every valid depth pixel into ``out`` (event camera), keeping the smallest z per pixel."""
+    """Scatter every valid depth pixel into ``out`` (event camera, +inf = none yet), keeping the smallest z.
+
+    Per pixel the ray ``T_rot @ ((u - cx) / fx, (v - cy) / fy, 1)`` is a row term plus a column term,
+    so a point costs three multiply-adds and one division.
+    """
     h, w = depth.shape
     eh, ew = out.shape
+    col = np.empty((3, w))
+    for u in range(w):
+        xn = (u - cx) / fx
+        col[0, u] = T[0, 0] * xn
+        col[1, u] = T[1, 0] * xn
+        col[2, u] = T[2, 0] * xn
     for v in range(h):
+        yn = (v - cy) / fy
+        r0 = T[0, 1] * yn + T[0, 2]
+        r1 = T[1, 1] * yn + T[1, 2]
+        r2 = T[2, 1] * yn + T[2, 2]
         for u in range(w):
             z = depth[v, u]
-            if not z > 0.0:
+            if not z > 0.0:  # also NaN
                 continue
-            x = (u - cx) / fx * z
-            y = (v - cy) / fy * z
-            qx = T[0, 0] * x + T[0, 1] * y + T[0, 2] * z + T[0, 3]
-            qy = T[1, 0] * x + T[1, 1] * y + T[1, 2] * z + T[1, 3]
-            qz = T[2, 0] * x + T[2, 1] * y + T[2, 2] * z + T[2, 3]
+            qz = (col[2, u] + r2) * z + T[2, 3]
             if qz <= 1e-3:
                 continue
-            iu = int(efx * qx / qz + ecx + 0.5)
-            iv = int(efy * qy / qz + ecy + 0.5)
-            if iu < 0 or iv < 0 or iu >= ew or iv >= eh:
+            inv = 1.0 / qz
+            fu = efx * ((col[0, u] + r0) * z + T[0, 3]) * inv + ecx + 0.5
+            fv = efy * ((col[1, u] + r1) * z + T[1, 3]) * inv + ecy + 0.5
+            if fu < 0.0 or fv < 0.0 or fu >= ew or fv >= eh:
                 continue
-            cur = out[iv, iu]
-            if cur == 0.0 or qz < cur:
-                out[iv, iu] = qz
+            iu = int(fu)
+            iv = int(fv)
+            out[iv, iu] = min(out[iv, iu], np.float32(qz))  # branch-free: neighbours often hit one pixel
 
 
 def depth_in_camera(depth_m: np.ndarray, rgb_camera: CameraModel, camera: CameraModel,
                     T_cam_rgb: np.ndarray) -> np.ndarray:
-    """Depth (z in ``camera``, float32, 0 = none) of a depth image on ``rgb_camera``'s pinhole grid, z-buffered."""
-    d = np.where(np.isfinite(depth_m), depth_m, 0.0).astype(np.float32)
-    out = np.zeros((camera.height, camera.width), np.float32)
+    """Depth (z in ``camera``, float32, 0 = none) of a depth image on ``rgb_camera``'s pinhole grid, z-buffered.
+
+    Pixels without depth (0, negative or NaN) are skipped.
+    """
+    d = np.ascontiguousarray(depth_m, dtype=np.float32)
+    out = np.full((camera.height, camera.width), np.inf, np.float32)
     _zbuffer(d, rgb_camera.fx, rgb_camera.fy, rgb_camera.cx, rgb_camera.cy,
              np.ascontiguousarray(T_cam_rgb, dtype=np.float64), camera.fx, camera.fy, camera.cx, camera.cy, out)
+    out[np.isinf(out)] = 0.0
     return out
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.event_frontend import EventFrame
+from atsvo_ros.core.event_frontend import EventFrame, select_event_frame
 from atsvo_ros.core.event_map import build_event_map
 from atsvo_ros.core.frontend import PreparedFrame
 from atsvo_ros.core.geometry import se3_inv
@@ -57,11 +57,17 @@ class KeyframeRequest:
 
 @dataclass(frozen=True)
 class EventMapRequest:
-    """What tracking hands to mapping to build the temporary event map: one frame's surface and depth."""
+    """What tracking hands to mapping to build the temporary event map: one frame's surface and depth.
+
+    ``fired`` (bool image on the surface's grid) are the pixels of the selection window's events: with
+    it mapping runs the event pixel selection (Section II-B) itself, so the whole build can happen
+    beside tracking; without it ``event_frame.selected`` is used as it is.
+    """
 
     event_frame: EventFrame
     depth_m: np.ndarray  # the colour-aligned depth of the same frame, on the colour camera's pinhole grid
     T_c_w: np.ndarray  # the colour camera's pose of that frame
+    fired: np.ndarray | None = None
 
 
 class Mapper:
@@ -125,7 +131,10 @@ class Mapper:
         """The temporary event map of Eq. 4 from one frame (:func:`atsvo_ros.core.event_map.build_event_map`)."""
         if self.event_camera is None:
             raise TrackingError("the mapper has no event camera: it cannot build an event map")
-        return build_event_map(req.event_frame, req.depth_m, self.camera, self.event_camera, se3_inv(req.T_c_w),
+        frame = req.event_frame
+        if req.fired is not None:
+            frame = select_event_frame(frame, req.fired, self.config.event_selection)
+        return build_event_map(frame, req.depth_m, self.camera, self.event_camera, se3_inv(req.T_c_w),
                                self.T_rgb_event)
 
     def _covered(self, uv: np.ndarray, tracked_uv: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

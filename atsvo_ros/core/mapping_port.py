@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Protocol
 
 from atsvo_ros.core.map import MapSnapshot, TemporaryEventMap
@@ -31,7 +32,14 @@ class MappingPort(Protocol):
         ...
 
     def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
-        """The temporary event map of a frame (None when mapping could not answer in time)."""
+        """The temporary event map of a frame (None when mapping could not answer in time).
+
+        For the request last given to :meth:`prepare_event_map` this is the map built meanwhile.
+        """
+        ...
+
+    def prepare_event_map(self, request: EventMapRequest) -> None:
+        """Start building the event map the next frame will probably ask for (after this frame's pose is out)."""
         ...
 
     def latest(self) -> MapSnapshot | None:
@@ -47,11 +55,46 @@ class MappingPort(Protocol):
         ...
 
 
+class EventMapBuilder:
+    """Builds temporary event maps now or ahead of time, in line or on a helper thread.
+
+    The next frame needs the event map of the frame just tracked (when the motion is fast). Tracking
+    asks for it as soon as that frame's pose is out (:meth:`prepare`), so the build (event pixel
+    selection, z-buffered depth, patches) overlaps the wait for the next frame instead of adding to
+    its latency; :meth:`get` with the same request returns it (waiting if it is not done yet), any
+    other request is built at once. ``background=False`` builds in the caller's thread at
+    :meth:`prepare` (the replay: same maps, same order, one thread).
+    """
+
+    def __init__(self, mapper: Mapper, background: bool) -> None:
+        self.mapper = mapper
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="atsvo-event-map") if background else None
+        self._ahead: tuple[EventMapRequest, Future | TemporaryEventMap] | None = None
+
+    def prepare(self, request: EventMapRequest) -> None:
+        if self._pool is None:
+            self._ahead = (request, self.mapper.build_event_map(request))
+        else:
+            self._ahead = (request, self._pool.submit(self.mapper.build_event_map, request))
+
+    def get(self, request: EventMapRequest) -> TemporaryEventMap:
+        ahead, self._ahead = self._ahead, None
+        if ahead is None or ahead[0] is not request:
+            return self.mapper.build_event_map(request)
+        return ahead[1].result() if isinstance(ahead[1], Future) else ahead[1]
+
+    def close(self) -> None:
+        self._ahead = None
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+
+
 class InlineMapping:
     """Mapping in the caller's thread: every answer is immediate and deterministic."""
 
     def __init__(self, mapper: Mapper) -> None:
         self.mapper = mapper
+        self._event_maps = EventMapBuilder(mapper, background=False)
 
     @property
     def n_keyframes(self) -> int:
@@ -61,7 +104,10 @@ class InlineMapping:
         return self.mapper.insert(request)
 
     def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
-        return self.mapper.build_event_map(request)
+        return self._event_maps.get(request)
+
+    def prepare_event_map(self, request: EventMapRequest) -> None:
+        self._event_maps.prepare(request)
 
     def latest(self) -> MapSnapshot | None:
         return None
@@ -70,16 +116,16 @@ class InlineMapping:
         return False
 
     def close(self) -> None:
-        pass
+        self._event_maps.close()
 
 
 class ThreadedMapping:
-    """Mapping in a worker thread (one keyframe request at a time; event maps are built in the caller's).
+    """Mapping in worker threads: keyframe insertion (one request at a time) and event maps.
 
-    The temporary event map is needed by the very next frame and takes a millisecond or two, so it is
-    built at once; keyframe insertion (selection, back-projection, patches on every level) runs beside
-    tracking. ``on_snapshot`` (optional) is called from the worker with each new snapshot, e.g. to
-    publish the map.
+    Keyframe insertion (selection, back-projection, patches on every level) runs beside tracking; the
+    temporary event map, needed by the very next frame, is built on a second thread while tracking
+    waits for that frame (:class:`EventMapBuilder`). ``on_snapshot`` (optional) is called from the
+    worker with each new snapshot, e.g. to publish the map.
     """
 
     def __init__(self, mapper: Mapper, synchronous: bool = False,
@@ -93,6 +139,7 @@ class ThreadedMapping:
         self._working = False
         self._stop = False
         self._error: BaseException | None = None
+        self._event_maps = EventMapBuilder(mapper, background=True)
         self._thread = threading.Thread(target=self._run, name="atsvo-mapping", daemon=True)
         self._thread.start()
 
@@ -114,7 +161,10 @@ class ThreadedMapping:
             return ready
 
     def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
-        return self.mapper.build_event_map(request)
+        return self._event_maps.get(request)
+
+    def prepare_event_map(self, request: EventMapRequest) -> None:
+        self._event_maps.prepare(request)
 
     def latest(self) -> MapSnapshot | None:
         with self._lock:
@@ -131,6 +181,7 @@ class ThreadedMapping:
             self._stop = True
             self._lock.notify_all()
         self._thread.join(timeout=5.0)
+        self._event_maps.close()
 
     def _raise(self) -> None:
         if self._error is not None:
@@ -162,4 +213,4 @@ class ThreadedMapping:
                 self._lock.notify_all()
 
 
-__all__ = ["InlineMapping", "MappingPort", "ThreadedMapping"]
+__all__ = ["EventMapBuilder", "InlineMapping", "MappingPort", "ThreadedMapping"]

@@ -99,6 +99,7 @@ class Odometry:
         self._event_time_s = 0.0  # ATS updates since the last frame (counted in its tracking time)
         # the previous frame's event surface, depth and pose: what a temporary event map is built from
         self._prev_event: tuple[EventFrame, np.ndarray, np.ndarray] | None = None
+        self._prev_request: EventMapRequest | None = None  # its event map, asked for ahead of the next frame
         self._events_since_frame = 0
         self._dropped_reported = 0  # the event front end's drop count at the last result
         self._events_per_frame: deque[int] = deque(maxlen=2)
@@ -208,7 +209,7 @@ class Odometry:
                 kf = self._insert(self.tracking.keyframe_request(prepared, out, rs))
         self.motion.push(stamp, out.T_c_w)
         if ev_frame is not None:
-            self._prev_event = (ev_frame, prepared.depth_m, out.T_c_w)
+            self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
         self._end_frame(n_events)
         return self._result(stamp, out.T_c_w, out, status, t_track, kf, fused)
 
@@ -316,8 +317,23 @@ class Odometry:
         """The temporary event map built (by mapping) from the previous frame's surface, depth and pose, or None."""
         if self._prev_event is None:
             return None
+        request, self._prev_request = self._prev_request or self._event_request(), None
+        return self.mapping.event_map(request)
+
+    def _event_request(self) -> EventMapRequest:
+        """The event-map request of the previous frame (mapping selects its pixels among those that fired)."""
         ev_frame, depth, T_c_w = self._prev_event
-        return self.mapping.event_map(EventMapRequest(self.events.select(ev_frame), depth, T_c_w))
+        return EventMapRequest(ev_frame, depth, T_c_w, self.events.recent_pixels(ev_frame.stamp_ns))
+
+    def _remember_event(self, ev_frame: EventFrame, depth_m: np.ndarray, T_c_w: np.ndarray) -> None:
+        """Keep this frame's surface for the next frame's event map, and have it built now if that frame will
+        fuse (the relative-motion factor of the poses so far is what the next frame tests): the build then
+        runs while tracking waits for the next frame, not after it arrives."""
+        self._prev_event = (ev_frame, depth_m, T_c_w)
+        self._prev_request = None
+        if self._is_fast():
+            self._prev_request = self._event_request()
+            self.mapping.prepare_event_map(self._prev_request)
 
     def _insert(self, request: KeyframeRequest) -> bool:
         """Ask mapping for a keyframe (one at a time; a reset waits for its answer); True when it was asked."""
@@ -362,7 +378,7 @@ class Odometry:
             self.last_loss_reason = why_not
         self.motion.push(stamp, T_c_w)
         if ev_frame is not None:
-            self._prev_event = (ev_frame, prepared.depth_m, T_c_w)
+            self._remember_event(ev_frame, prepared.depth_m, T_c_w)
         return self._result(stamp, T_c_w, None, status, t_track, ok)
 
     def _reinitialise(self, prepared: PreparedFrame, stamp: int, predicted: np.ndarray, t0: float,
@@ -382,7 +398,9 @@ class Odometry:
             reason = f"{reason}; {why_not}" if reason else why_not
         self.motion.push(stamp, predicted)
         # the new map and this frame's event surface share the predicted pose: a consistent base for the next
-        self._prev_event = (ev_frame, prepared.depth_m, predicted) if ok and ev_frame is not None else None
+        self._prev_event, self._prev_request = None, None
+        if ok and ev_frame is not None:
+            self._remember_event(ev_frame, prepared.depth_m, predicted)
         status = TrackingStatus.REINITIALISED if ok else TrackingStatus.LOST
         self.last_loss_reason = reason
         return self._result(stamp, predicted, None, status, t_track, ok)

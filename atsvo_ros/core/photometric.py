@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from atsvo_ros.core._sampling_kernels import _bilinear
+
 #: 9-pixel RGB residual pattern (dx, dy): the 3x3 neighbourhood, centre first.
 RGB_PATTERN = np.array([(0, 0), (-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)],
                        dtype=np.float32)
@@ -32,22 +34,12 @@ def bilinear(image: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     and read 0.
     """
     img = np.asarray(image, dtype=np.float32)
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    h, w = img.shape[:2]
-    x, y = uv[:, 0], uv[:, 1]
-    valid = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x <= w - 1) & (y <= h - 1)
-    xs = np.where(valid, x, 0.0)
-    ys = np.where(valid, y, 0.0)
-    x0 = np.minimum(np.floor(xs).astype(np.int64), w - 2 if w > 1 else 0)
-    y0 = np.minimum(np.floor(ys).astype(np.int64), h - 2 if h > 1 else 0)
-    fx = (xs - x0).astype(np.float32)
-    fy = (ys - y0).astype(np.float32)
-    x1 = np.minimum(x0 + 1, w - 1)
-    y1 = np.minimum(y0 + 1, h - 1)
-    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
-    bot = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
-    out = (top * (1 - fy) + bot * fy).astype(np.float32)
-    out[~valid] = 0.0
+    if img.ndim != 2:
+        raise ValueError(f"bilinear samples a single-channel image, got shape {img.shape}")
+    uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
+    out = np.empty(len(uv), np.float32)
+    valid = np.empty(len(uv), np.bool_)
+    _bilinear(img, uv, out, valid)
     return out, valid
 
 

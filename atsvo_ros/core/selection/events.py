@@ -43,7 +43,25 @@ def ats_mask(ats: np.ndarray, median_ksize: int) -> np.ndarray:
     """Step 1: pixels whose median-blurred ATS value is above 0 and at least the blurred image's median."""
     img = np.clip(ats + 0.5, 0, 255).astype(np.uint8)
     blurred = cv2.medianBlur(img, median_ksize) if median_ksize > 1 else img
-    return (blurred > 0) & (blurred >= np.median(blurred))
+    return (blurred > 0) & (blurred >= _median_u8(blurred))
+
+
+def _median_u8(img: np.ndarray) -> float:
+    """``np.median`` of a uint8 image from its histogram (O(n), no sort)."""
+    cum = np.cumsum(np.bincount(img.ravel(), minlength=256))
+    n = int(cum[-1])
+    lo, hi = np.searchsorted(cum, [(n - 1) // 2 + 1, n // 2 + 1])
+    return 0.5 * (float(lo) + float(hi))
+
+
+def _best_first(score: np.ndarray) -> np.ndarray:
+    """Indices of ``score`` (float32, >= 0) from the highest down; ties keep index order.
+
+    Sorted as the scores' bit patterns (for non-negative IEEE floats their order), which numpy sorts
+    about 1.5x faster than the floats themselves; exact, unlike a quantised radix sort.
+    """
+    keys = np.maximum(np.asarray(score, dtype=np.float32), np.float32(0.0)) + np.float32(0.0)  # no -0.0
+    return np.argsort(~keys.view(np.uint32), kind="stable")
 
 
 def gradient_magnitude(img: np.ndarray) -> np.ndarray:
@@ -100,7 +118,7 @@ def select_event_pixels_detailed(ats: np.ndarray, events: EventBatch | np.ndarra
     inside = (cx >= b) & (cy >= b) & (cx < w - b) & (cy < h - b)
     passed = on_mask & inside & (score > cfg.h)
     idx = np.flatnonzero(passed)
-    order = idx[np.argsort(-score[idx], kind="stable")]
+    order = idx[_best_first(score[idx])]
     keep = _thin(cx, cy, order, int(cfg.min_distance_px), w, h, int(cfg.max_points))
     selected = np.stack([cx[keep], cy[keep]], axis=1).astype(np.int64) if len(keep) else np.zeros((0, 2), np.int64)
     return EventSelection(mask, np.stack([cx, cy], axis=1), on_mask, score, passed, selected)
@@ -115,7 +133,7 @@ def select_event_pixels(ats: np.ndarray, events: EventBatch | np.ndarray, t_ns: 
         events: recent events (at least the last ``window_fraction * window_ns``; older ones are ignored),
             or the bool image of the pixels they hit (:func:`event_pixel_mask`).
         t_ns: the ATS time.
-        window_ns: the ATS window (``TimeSurface.window_ns()``).
+        window_ns: the ATS window (``TimeSurface.window_ns()``; unused when ``events`` is a mask).
         cfg: Eq. 3 parameters.
     """
     return select_event_pixels_detailed(ats, events, t_ns, window_ns, cfg).selected
