@@ -70,6 +70,8 @@ class OdometryResult:
     took part in this frame). ``reason`` says why the status is not ``ok`` (None when it is).
     ``inliers`` holds the inlier count of each residual block (``rgb``, ``depth``, ``ats``);
     ``events_dropped`` the events the rate cap (``fusion.max_event_rate_ev_s``) left out since the last frame.
+    ``event_map_time_s``: for a fused frame, what building its temporary event map took on mapping's side
+    (built while tracking waited for this frame, so not in ``tracking_time_s``).
     """
 
     stamp_ns: int
@@ -85,6 +87,7 @@ class OdometryResult:
     reason: str | None = None
     inliers: dict[str, int] = field(default_factory=dict)
     events_dropped: int = 0
+    event_map_time_s: float = 0.0
 
 
 __all__ = ["OdometryResult", "RgbdFrame", "TrackingStatus"]

@@ -215,13 +215,15 @@ class TemporaryEventMap:
     """The event-based temporary map N of Eq. 4 (built by the fusion issue when fast motion starts).
 
     Same content as the RGB map (world points, per-level patches) but with ATS intensities and its
-    own pattern; it is replaced wholesale, never grown.
+    own pattern; it is replaced wholesale, never grown. ``build_time_s``: what building it took
+    (selection, z-buffered depth, patches), wherever mapping ran it.
     """
 
     points_w: np.ndarray
     patches: np.ndarray
     stamp_ns: int
     T_w_c: np.ndarray
+    build_time_s: float = 0.0
 
     @classmethod
     def empty(cls, n_levels: int, pattern_size: int) -> TemporaryEventMap:

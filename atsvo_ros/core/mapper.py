@@ -9,6 +9,8 @@ mapper can run in the tracking thread (the replay), in a thread of its own or in
 """
 from __future__ import annotations
 
+import dataclasses
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,11 +133,13 @@ class Mapper:
         """The temporary event map of Eq. 4 from one frame (:func:`atsvo_ros.core.event_map.build_event_map`)."""
         if self.event_camera is None:
             raise TrackingError("the mapper has no event camera: it cannot build an event map")
+        t0 = time.perf_counter()
         frame = req.event_frame
         if req.fired is not None:
             frame = select_event_frame(frame, req.fired, self.config.event_selection)
-        return build_event_map(frame, req.depth_m, self.camera, self.event_camera, se3_inv(req.T_c_w),
-                               self.T_rgb_event)
+        event_map = build_event_map(frame, req.depth_m, self.camera, self.event_camera, se3_inv(req.T_c_w),
+                                    self.T_rgb_event)
+        return dataclasses.replace(event_map, build_time_s=time.perf_counter() - t0)
 
     def _covered(self, uv: np.ndarray, tracked_uv: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         """Candidates in a cell (of the size that spreads the target count) that a tracked point occupies."""

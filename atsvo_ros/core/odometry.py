@@ -429,9 +429,12 @@ class Odometry:
         if self.events is not None:
             dropped = self.events.dropped_events - self._dropped_reported
             self._dropped_reported = self.events.dropped_events
+        em = self.tracking.event_map
+        em_time_s = em.build_time_s if fused and em is not None else 0.0
         return OdometryResult(stamp, T_odom_base, T_odom_cam, cov, status, "fused" if fused else "rgbd",
                               float(t_track), int(n_points),
-                              int(inliers.get("rgb", 0)), bool(kf), self.last_loss_reason, inliers, int(dropped))
+                              int(inliers.get("rgb", 0)), bool(kf), self.last_loss_reason, inliers, int(dropped),
+                              float(em_time_s))
 
 
 __all__ = ["Odometry", "OdometryResult", "RgbdFrame", "TrackingStatus"]

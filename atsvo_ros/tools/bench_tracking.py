@@ -187,6 +187,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     m = ev.metrics
     times = np.array([r.tracking_time_s for r in results if r.status.value == "ok" and not r.keyframe_inserted]) * 1e3
     fused_t = np.array([r.tracking_time_s for r in results if r.mode == "fused"]) * 1e3
+    em_t = np.array([r.event_map_time_s for r in results if r.mode == "fused"]) * 1e3
     all_t = np.array([r.tracking_time_s for r in results]) * 1e3
     err_m = ev.position_errors_m
     bad = np.flatnonzero(err_m > loss_limit_cm * 0.01)
@@ -204,6 +205,8 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
         "statuses": dict(Counter(statuses)), "keyframes": getattr(rt.core, "n_keyframes", None),
         "modes": dict(Counter(r.mode for r in results)), "events": int(rt.counters.get("events", 0)),
         "fused_ms_median": float(np.median(fused_t)) if len(fused_t) else None,
+        "fused_ms_p95": float(np.percentile(fused_t, 95)) if len(fused_t) else None,
+        "event_map_ms_median": float(np.median(em_t)) if len(em_t) else None,
         "max_error_cm": float(err_m.max() * 100.0), "status_left_ok_in_time": bool(flagged),
         "latency_ms_p50": float(np.median(all_t)), "latency_ms_p95": float(np.percentile(all_t, 95)),
         "latency_ms_p99": float(np.percentile(all_t, 99)), "latency_ms_max": float(np.max(all_t)),

@@ -221,7 +221,8 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     frames_info = [{"stamp_ns": int(r.stamp_ns), "tracking_time_s": float(r.tracking_time_s), "mode": r.mode,
                     "status": r.status.value, "reason": r.reason, "n_points": int(r.n_points),
                     "n_inliers": int(r.n_inliers), "inliers": dict(r.inliers), "keyframe": bool(r.keyframe_inserted),
-                    "n_events": int(o.n_events)} for o, r in zip(outputs, results)]
+                    "n_events": int(o.n_events), "event_map_time_s": float(r.event_map_time_s)}
+                   for o, r in zip(outputs, results)]
     timing = {"mode": used_mode, "frame": frame, "n_frames": len(results), "wall_time_s": wall,
               "bag_duration_s": bag_duration, "real_time_factor": result.real_time_factor,
               "tracking_time_mean_s": float(np.mean(tt)), "tracking_time_median_s": float(np.median(tt)),

@@ -65,3 +65,54 @@ def test_a_mapping_error_surfaces_in_the_tracking_thread():
             port.insert(req, wait=True)
     finally:
         port.close()
+
+
+class _CountingMapper:
+    """Stands in for the mapper: each build returns a new object and is recorded with its thread."""
+
+    def __init__(self):
+        import threading
+
+        self.builds = []
+        self._threading = threading
+
+    def build_event_map(self, request):
+        self.builds.append((request, self._threading.current_thread().name))
+        return object()
+
+
+@pytest.mark.parametrize("background", [False, True])
+def test_an_event_map_asked_for_ahead_is_built_once_and_handed_over(background):
+    from atsvo_ros.core.mapping_port import EventMapBuilder
+
+    mapper = _CountingMapper()
+    builder = EventMapBuilder(mapper, background=background)
+    try:
+        first, other = object(), object()
+        builder.prepare(first)
+        built = builder.get(first)  # the map built ahead (on the helper thread when background)
+        assert len(mapper.builds) == 1 and mapper.builds[0][0] is first
+        assert mapper.builds[0][1].startswith("atsvo-event-map") == background
+        assert builder.get(first) is not built and len(mapper.builds) == 2  # handed over once, then built anew
+        builder.prepare(first)
+        builder.get(other)  # not the prepared request: built at once, in the caller's thread
+        assert mapper.builds[-1][0] is other and not mapper.builds[-1][1].startswith("atsvo-event-map")
+    finally:
+        builder.close()
+
+
+def test_a_failed_event_map_build_raises_in_the_tracking_thread():
+    from atsvo_ros.core.mapping_port import EventMapBuilder
+
+    class Broken:
+        def build_event_map(self, request):
+            raise RuntimeError("event map broke")
+
+    builder = EventMapBuilder(Broken(), background=True)
+    try:
+        request = object()
+        builder.prepare(request)
+        with pytest.raises(RuntimeError, match="event map broke"):
+            builder.get(request)
+    finally:
+        builder.close()
