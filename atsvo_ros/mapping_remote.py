@@ -19,9 +19,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from atsvo_ros.config import AtsvoConfig, flatten
-from atsvo_ros.core.map import MapSnapshot, TemporaryEventMap
-from atsvo_ros.core.mapper import EventMapRequest, KeyframeRequest, Mapper
-from atsvo_ros.core.mapping_port import EventMapBuilder
+from atsvo_ros.core.map import MapSnapshot
+from atsvo_ros.core.mapper import KeyframeRequest, Mapper
+from atsvo_ros.core.mapping_port import EventMapBuilder, EventMapsAhead
 from atsvo_ros.io.wire import (
     PinholeLevels,
     decode_keyframe_request,
@@ -45,7 +45,7 @@ def mapping_digest(config: AtsvoConfig) -> str:
     return hashlib.sha256(repr([(k, flat[k]) for k in keys]).encode()).hexdigest()[:12]
 
 
-class RemoteMapping:
+class RemoteMapping(EventMapsAhead):
     """A mapping port whose mapper is in another process (see the module docstring).
 
     One instance per odometry core, with its own session id: answers to another session's requests
@@ -110,12 +110,6 @@ class RemoteMapping:
                 self._cond.wait(left)
             ready, self._ready = self._ready, None
             return ready
-
-    def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
-        return self._event_maps.get(request)
-
-    def prepare_event_map(self, request: EventMapRequest) -> None:
-        self._event_maps.prepare(request)
 
     def latest(self) -> MapSnapshot | None:
         with self._cond:

@@ -89,7 +89,19 @@ class EventMapBuilder:
             self._pool.shutdown(wait=True)
 
 
-class InlineMapping:
+class EventMapsAhead:
+    """The event-map half of :class:`MappingPort`, for ports that hold an :class:`EventMapBuilder`."""
+
+    _event_maps: EventMapBuilder
+
+    def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
+        return self._event_maps.get(request)
+
+    def prepare_event_map(self, request: EventMapRequest) -> None:
+        self._event_maps.prepare(request)
+
+
+class InlineMapping(EventMapsAhead):
     """Mapping in the caller's thread: every answer is immediate and deterministic."""
 
     def __init__(self, mapper: Mapper) -> None:
@@ -103,12 +115,6 @@ class InlineMapping:
     def insert(self, request: KeyframeRequest, wait: bool = False) -> MapSnapshot | None:
         return self.mapper.insert(request)
 
-    def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
-        return self._event_maps.get(request)
-
-    def prepare_event_map(self, request: EventMapRequest) -> None:
-        self._event_maps.prepare(request)
-
     def latest(self) -> MapSnapshot | None:
         return None
 
@@ -119,7 +125,7 @@ class InlineMapping:
         self._event_maps.close()
 
 
-class ThreadedMapping:
+class ThreadedMapping(EventMapsAhead):
     """Mapping in worker threads: keyframe insertion (one request at a time) and event maps.
 
     Keyframe insertion (selection, back-projection, patches on every level) runs beside tracking; the
@@ -159,12 +165,6 @@ class ThreadedMapping:
                 self._raise()
             ready, self._ready = self._ready, None
             return ready
-
-    def event_map(self, request: EventMapRequest) -> TemporaryEventMap | None:
-        return self._event_maps.get(request)
-
-    def prepare_event_map(self, request: EventMapRequest) -> None:
-        self._event_maps.prepare(request)
 
     def latest(self) -> MapSnapshot | None:
         with self._lock:
@@ -213,4 +213,4 @@ class ThreadedMapping:
                 self._lock.notify_all()
 
 
-__all__ = ["EventMapBuilder", "InlineMapping", "MappingPort", "ThreadedMapping"]
+__all__ = ["EventMapBuilder", "EventMapsAhead", "InlineMapping", "MappingPort", "ThreadedMapping"]
