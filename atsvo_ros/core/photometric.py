@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from atsvo_ros.core._sampling_kernels import _bilinear
+from atsvo_ros.errors import ImageError
 
 #: 9-pixel RGB residual pattern (dx, dy): the 3x3 neighbourhood, centre first.
 RGB_PATTERN = np.array([(0, 0), (-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)],
@@ -35,7 +36,7 @@ def bilinear(image: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """
     img = np.asarray(image, dtype=np.float32)
     if img.ndim != 2:
-        raise ValueError(f"bilinear samples a single-channel image, got shape {img.shape}")
+        raise ImageError(f"bilinear samples a single-channel image, got shape {img.shape}")
     uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
     out = np.empty(len(uv), np.float32)
     valid = np.empty(len(uv), np.bool_)

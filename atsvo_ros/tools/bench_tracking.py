@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import sys
 import time
 from collections import Counter
@@ -58,7 +59,7 @@ def simulated_frames(spec: Any, progress: bool = True) -> tuple[list[tuple[int, 
     imu = ImuBatch.concatenate(list(sim.imu())) if sim.has_imu else None
     path.parent.mkdir(parents=True, exist_ok=True)
     extra = {} if imu is None else {"imu_t": imu.stamps_ns, "imu_g": imu.gyro_rad_s, "imu_a": imu.accel_m_s2}
-    tmp = path.with_suffix(".tmp.npz")
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # parallel runs may fill the same entry
     np.savez_compressed(tmp, stamps=np.array([f[0] for f in frames], np.int64), rgb=np.stack([f[1] for f in frames]),
                         depth=np.stack([f[2] for f in frames]), **extra)
     tmp.replace(path)
@@ -81,7 +82,7 @@ def simulated_events(spec: Any, progress: bool = True) -> Any:
     batches = list(tqdm(sim.events(), desc=f"simulate events {spec.scenario}", disable=not progress,
                         file=sys.stderr, leave=False, unit="packet"))
     ev = EventBatch.concatenate(batches)
-    tmp = path.with_suffix(".tmp.npz")
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # parallel runs may fill the same entry
     np.savez_compressed(tmp, x=ev.x, y=ev.y, t=ev.t, p=ev.p, w=ev.width, h=ev.height)
     tmp.replace(path)
     return ev
