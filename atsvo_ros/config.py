@@ -231,6 +231,14 @@ class TrackerConfig:
     max_gyro_disagreement_deg: float = _f(2.0, 0.0, 180.0, lo_open=True,
                                           doc="rotation between the estimate and the gyro's prediction beyond which "
                                               "the frame is degraded (a wrong visual optimum)")
+    max_acceleration_m_s2: float = _f(60.0, 0.0, 1e4, lo_open=True,
+                                      doc="largest acceleration of the camera over a frame interval; a pose whose "
+                                          "camera centre is further from the constant-velocity prediction than this "
+                                          "allows (a dt (dt + dt0) / 2 + tracker.motion_noise_m) is degraded. "
+                                          "Mini-Cheetah gaits and flips in the simulator reach 4.1 g (backflip), "
+                                          "3.2 g (pronk); 6 g leaves room for harder landings. Hand-held: ~2 g")
+    motion_noise_m: float = _f(0.02, 0.0, 10.0, doc="noise of the estimated camera centres that the "
+                               "constant-velocity check allows on top of the acceleration's reach")
     degraded_covariance_scale: float = _f(100.0, 1.0, 1e12, doc="factor on the covariance of a degraded frame")
     min_contrast: float = _f(2.0, 0.0, 255.0,
                              doc="standard deviation of the grey image (0-255) at 1/4 resolution below which the "

@@ -11,8 +11,10 @@ residual term apart and look for what a wrong pose leaves behind:
   inlier counts);
 * degraded: tracked, but the inlier patches correlate poorly with the image (mean ZNCC below
   ``min_zncc``: they landed on other texture), the rotation disagrees with the gyro's prediction by
-  more than ``max_gyro_disagreement_deg``, or the depth term rejects most of its points (the
-  photometric optimum disagrees with the scene's geometry).
+  more than ``max_gyro_disagreement_deg``, the camera centre left the constant-velocity prediction by
+  more than the platform can accelerate (``max_acceleration_m_s2``: a wrong optimum that slid along
+  a plane or a repeated texture), or the depth term rejects most of its points (the photometric
+  optimum disagrees with the scene's geometry).
 """
 from __future__ import annotations
 
@@ -21,10 +23,24 @@ from dataclasses import dataclass
 import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
-from atsvo_ros.core.geometry import relative_motion, rotation_angle_rad, se3_inv
+from atsvo_ros.core.geometry import camera_centre, relative_motion, rotation_angle_rad, se3_inv
 from atsvo_ros.core.tracker import TrackResult
 
 OK, DEGRADED, LOST = "ok", "degraded", "lost"
+
+
+@dataclass(frozen=True)
+class Priors:
+    """What the motion says the pose should be, for the checks.
+
+    ``gyro_T_c_w``: the pose with the gyro's rotation since the last frame. ``centre_w``: the camera
+    centre (world) of the constant-velocity prediction, made only from trusted poses, and
+    ``centre_tolerance_m`` how far from it the platform's acceleration can take the camera.
+    """
+
+    gyro_T_c_w: np.ndarray | None = None
+    centre_w: np.ndarray | None = None
+    centre_tolerance_m: float = float("inf")
 
 
 @dataclass(frozen=True)
@@ -45,12 +61,12 @@ class Verdict:
 
 def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: np.ndarray,
           affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: dict[str, float],
-          gyro_T_c_w: np.ndarray | None = None) -> Verdict:
+          priors: Priors | None = None) -> Verdict:
     """Apply the checks of the module docstring to one tracking result.
 
     ``zncc`` is the mean ZNCC of each image term's inlier patches (by block name); only the terms that pass
     their own inlier counts are judged by it: a dozen blurred colour patches mid-flip correlate with
-    nothing while the ATS term holds the pose. ``gyro_T_c_w`` is the gyro's prediction.
+    nothing while the ATS term holds the pose. ``priors`` are the motion's predictions (gyro, constant velocity).
     """
     cfg = config.tracker
     if not res.ok:
@@ -81,10 +97,17 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
         return Verdict.lost(f"patches do not match the image (mean ZNCC {best:.2f})")
     if np.isfinite(best) and best < cfg.min_zncc:
         return Verdict(DEGRADED, f"patches match the image poorly (mean ZNCC {best:.2f})")
-    if gyro_T_c_w is not None:
-        off = np.degrees(rotation_angle_rad(T_c_w[:3, :3] @ gyro_T_c_w[:3, :3].T))
+    priors = priors or Priors()
+    if priors.gyro_T_c_w is not None:
+        off = np.degrees(rotation_angle_rad(T_c_w[:3, :3] @ priors.gyro_T_c_w[:3, :3].T))
         if off > cfg.max_gyro_disagreement_deg:
             return Verdict(DEGRADED, f"the pose disagrees with the gyro by {off:.1f} deg")
+    if priors.centre_w is not None:
+        off_m = float(np.linalg.norm(camera_centre(T_c_w) - priors.centre_w))
+        if off_m > priors.centre_tolerance_m:
+            reach_cm = priors.centre_tolerance_m * 100
+            return Verdict(DEGRADED, f"the camera centre is {off_m * 100:.1f} cm from the constant-velocity "
+                                     f"prediction (the platform's acceleration allows {reach_cm:.1f})")
     depth = res.blocks.get("depth")
     if (depth is not None and depth.n_visible >= cfg.min_inliers
             and depth.inlier_fraction < cfg.min_depth_inlier_fraction):
@@ -93,4 +116,4 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
     return Verdict(OK)
 
 
-__all__ = ["DEGRADED", "LOST", "OK", "Verdict", "judge"]
+__all__ = ["DEGRADED", "LOST", "OK", "Priors", "Verdict", "judge"]

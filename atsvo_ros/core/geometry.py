@@ -139,6 +139,11 @@ def check_pose(T: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     return T
 
 
+def camera_centre(T_c_w: np.ndarray) -> np.ndarray:
+    """The camera centre in the world frame (``-R^T t`` of ``T_c_w``)."""
+    return -T_c_w[:3, :3].T @ T_c_w[:3, 3]
+
+
 def project_to_so3(R: np.ndarray) -> np.ndarray:
     """Nearest rotation matrix (SVD), used to clean up accumulated round-off."""
     U, _, Vt = np.linalg.svd(np.asarray(R, dtype=np.float64))

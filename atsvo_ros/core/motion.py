@@ -17,7 +17,7 @@ from collections import deque
 
 import numpy as np
 
-from atsvo_ros.core.geometry import se3_exp, se3_inv, se3_log, so3_log
+from atsvo_ros.core.geometry import camera_centre, se3_exp, se3_inv, se3_log, so3_log
 
 
 class MotionModel:
@@ -28,17 +28,40 @@ class MotionModel:
 
     def __init__(self) -> None:
         self._history: deque[tuple[int, np.ndarray]] = deque(maxlen=2)
+        self._trusted: deque[bool] = deque(maxlen=2)
 
     def reset(self) -> None:
         """Forget the motion (after a clock jump or a re-initialisation the velocity is unknown)."""
         last = self._history[-1] if self._history else None
         self._history.clear()
+        self._trusted.clear()
         if last is not None:
             self._history.append(last)
+            self._trusted.append(False)
 
-    def push(self, stamp_ns: int, T_c_w: np.ndarray) -> None:
-        """Record the pose of a frame (trusted or predicted: the published trajectory continues from it)."""
+    def push(self, stamp_ns: int, T_c_w: np.ndarray, trusted: bool = True) -> None:
+        """Record the pose of a frame: trusted (an alignment the checks passed) or not (degraded, predicted);
+        the published trajectory continues from either."""
         self._history.append((int(stamp_ns), np.asarray(T_c_w, dtype=np.float64).copy()))
+        self._trusted.append(bool(trusted))
+
+    def centre_prior(self, stamp_ns: int, max_acceleration_m_s2: float,
+                     noise_m: float) -> tuple[np.ndarray, float] | None:
+        """The constant-velocity camera centre at ``stamp_ns`` and how far from it the camera can be.
+
+        Positions ``p0, p1`` at ``-dt0, 0`` give the velocity at ``-dt0 / 2``; with the acceleration bounded
+        by ``a`` the centre at ``dt`` is within ``a dt (dt + dt0) / 2`` of the prediction, plus ``noise_m``
+        for the estimates' own noise. None unless the last two poses are trusted (a wrong pose would make a
+        wrong prediction) and the frame follows within :attr:`MAX_RATIO` intervals.
+        """
+        if len(self._history) < 2 or not all(self._trusted):
+            return None
+        (s0, _), (s1, _) = self._history
+        dt0_s, dt_s = (s1 - s0) * 1e-9, (int(stamp_ns) - s1) * 1e-9
+        if dt0_s <= 0.0 or dt_s <= 0.0 or dt_s > self.MAX_RATIO * dt0_s:
+            return None
+        reach_m = 0.5 * max_acceleration_m_s2 * dt_s * (dt_s + dt0_s)
+        return camera_centre(self.predict(stamp_ns)), reach_m + noise_m
 
     @property
     def history(self) -> tuple[tuple[int, np.ndarray], ...]:
@@ -100,7 +123,7 @@ class MotionModel:
         if not self._history:
             return T_pred
         T1 = self._history[-1][1]
-        centre = -T_pred[:3, :3].T @ T_pred[:3, 3]  # camera centre in the world
+        centre = camera_centre(T_pred)
         out = np.eye(4)
         out[:3, :3] = R_c1_c0 @ T1[:3, :3]
         out[:3, 3] = -out[:3, :3] @ centre
@@ -116,8 +139,7 @@ class MotionModel:
         if dt_s <= 0:
             return None
         ang = float(np.linalg.norm(so3_log(T1[:3, :3] @ T0[:3, :3].T)))  # rotation c0 -> c1
-        centre0 = -T0[:3, :3].T @ T0[:3, 3]
-        centre1 = -T1[:3, :3].T @ T1[:3, 3]
+        centre0, centre1 = camera_centre(T0), camera_centre(T1)
         return ang / dt_s, float(np.linalg.norm(centre1 - centre0)) / dt_s
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.checks import DEGRADED, OK
+from atsvo_ros.core.checks import DEGRADED, OK, Priors
 from atsvo_ros.core.event_frontend import EventFrame, EventFrontEnd
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
@@ -171,10 +171,11 @@ class Odometry:
         guesses = self._guesses(stamp, predicted, gyro, fast)
         last = self.motion.last[1] if self.motion.last else predicted
         rs = self._rolling_shutter(stamp)
+        priors = self._priors(stamp, gyro)
         # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
         self.tracking.set_event_map(self._event_map() if fast else None)
         fused = self.tracking.uses_events(ev_frame)
-        out = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
+        out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
         status = TrackingStatus.OK
         if out.verdict.level != OK:
             # Not trusted: try harder before accepting a degraded pose or starting a new map.
@@ -183,10 +184,10 @@ class Odometry:
                 # RGB-D alone could not hold the pose (a sudden push-off): the events saw the motion
                 self.tracking.set_event_map(self._event_map())
                 if self.tracking.uses_events(ev_frame):
-                    retry = self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
+                    retry = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
                     attempts.append((retry, True, TrackingStatus.DEGRADED))
             if all(a[0].verdict.level != OK for a in attempts):
-                reloc = self._relocalise(prepared, guesses[0], last, rs, gyro, ev_frame)
+                reloc = self._relocalise(prepared, guesses[0], last, rs, priors, ev_frame)
                 attempts.append((reloc, self.tracking.uses_events(ev_frame), TrackingStatus.RELOCALISED))
             best = _best_attempt(attempts)
             if best is None:
@@ -207,7 +208,7 @@ class Odometry:
             self._affine = out.affine
             if out.health is not None and out.health.needs_keyframe:
                 kf = self._insert(self.tracking.keyframe_request(prepared, out, rs))
-        self.motion.push(stamp, out.T_c_w)
+        self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED)
         if ev_frame is not None:
             self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
         self._end_frame(n_events)
@@ -279,13 +280,22 @@ class Odometry:
             if self._events_per_frame[-1] > 0 else None
 
     def _relocalise(self, prepared: PreparedFrame, predicted: np.ndarray, last: np.ndarray,
-                    rs: RollingShutter | None, gyro: np.ndarray | None,
+                    rs: RollingShutter | None, priors: Priors,
                     ev_frame: EventFrame | None) -> TrackingOutcome:
         """Track again from wider starting points: the recent keyframes' poses and doubled rotation hypotheses."""
         cfg = self.config.tracker
         guesses = [predicted, *(se3_inv(kf.T_w_c) for kf in reversed(self.tracking.snapshot.keyframes[-3:]))]
         guesses += rotation_hypotheses(predicted, max(2.0 * cfg.rotation_hypotheses_deg, 4.0))
-        return self.tracking.track(prepared, guesses, self._affine, last, rs, gyro, ev_frame)
+        return self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
+
+    def _priors(self, stamp: int, gyro: np.ndarray | None) -> Priors:
+        """What the motion says this frame's pose should be: the gyro's prediction and, after two trusted frames,
+        the constant-velocity camera centre with the reach of ``tracker.max_acceleration_m_s2``."""
+        cfg = self.config.tracker
+        centre = self.motion.centre_prior(stamp, cfg.max_acceleration_m_s2, cfg.motion_noise_m)
+        if centre is None:
+            return Priors(gyro)
+        return Priors(gyro, centre[0], centre[1])
 
     def motion_rates(self) -> tuple[float, float] | None:
         """The paper's relative-motion factor: camera angular rate (rad/s) and speed (m/s) over the last two frames.
@@ -376,7 +386,7 @@ class Odometry:
         else:
             status = TrackingStatus.INITIALISING if first else TrackingStatus.LOST
             self.last_loss_reason = why_not
-        self.motion.push(stamp, T_c_w)
+        self.motion.push(stamp, T_c_w, trusted=first)  # the first pose defines odom; a later one is a guess
         if ev_frame is not None:
             self._remember_event(ev_frame, prepared.depth_m, T_c_w)
         return self._result(stamp, T_c_w, None, status, t_track, ok)
@@ -396,7 +406,7 @@ class Odometry:
             self.motion.reset()
         else:
             reason = f"{reason}; {why_not}" if reason else why_not
-        self.motion.push(stamp, predicted)
+        self.motion.push(stamp, predicted, trusted=False)
         # the new map and this frame's event surface share the predicted pose: a consistent base for the next
         self._prev_event, self._prev_request = None, None
         if ok and ev_frame is not None:

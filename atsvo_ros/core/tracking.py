@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
-from atsvo_ros.core.checks import Verdict, judge
+from atsvo_ros.core.checks import Priors, Verdict, judge
 from atsvo_ros.core.event_frontend import EventFrame
 from atsvo_ros.core.frontend import PreparedFrame
 from atsvo_ros.core.geometry import project_to_so3, se3_exp
@@ -144,12 +144,12 @@ class Tracking:
 
     def track(self, frame: PreparedFrame, guesses: list[np.ndarray], affine: tuple[float, float],
               reference: np.ndarray, rolling_shutter: RollingShutter | None = None,
-              gyro_T_c_w: np.ndarray | None = None, event_frame: EventFrame | None = None) -> TrackingOutcome:
+              priors: Priors | None = None, event_frame: EventFrame | None = None) -> TrackingOutcome:
         """Align ``frame`` to the snapshot from ``guesses`` and judge the estimate.
 
         ``reference`` is the last trusted pose (for the step-size check); ``affine`` the brightness
-        model carried from the previous frame; ``gyro_T_c_w`` the gyro's prediction, when there is one
-        (the estimate must agree with its rotation); ``event_frame`` the event camera at this frame.
+        model carried from the previous frame; ``priors`` the motion's predictions the estimate must agree
+        with (gyro rotation, constant-velocity centre); ``event_frame`` the event camera at this frame.
         """
         cfg = self.config.tracker
         blocks = self.blocks(frame, rolling_shutter, event_frame)
@@ -167,7 +167,7 @@ class Tracking:
         new_affine = self._new_affine(res, frame, T_c_w, inl, affine)
         znccs = {b.name: _mean_zncc(b) for b in blocks if isinstance(b, PhotometricBlock)}
         zncc = max(znccs.values(), default=float("nan"), key=lambda z: -np.inf if np.isnan(z) else z)
-        verdict = judge(self.config, res, T_c_w, reference, affine, new_affine, znccs, gyro_T_c_w)
+        verdict = judge(self.config, res, T_c_w, reference, affine, new_affine, znccs, priors)
         if len(states) == len(self._outlier_runs):
             self._outlier_runs = np.where(states == OUTLIER, self._outlier_runs + 1,
                                           np.where(states == INLIER, 0, self._outlier_runs)).astype(np.int32)

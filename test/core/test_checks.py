@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
-from atsvo_ros.core.checks import DEGRADED, LOST, OK, judge
+from atsvo_ros.core.checks import DEGRADED, LOST, OK, Priors, judge
 from atsvo_ros.core.geometry import se3_exp
 from atsvo_ros.core.tracker import BlockStats, TrackResult
 
@@ -25,9 +25,10 @@ def _result(**changes) -> TrackResult:
 I4 = np.eye(4)
 
 
-def _judge(res=None, T=I4, ref=I4, aff=((0.0, 0.0), (0.0, 0.0)), zncc=0.9, gyro=None):
+def _judge(res=None, T=I4, ref=I4, aff=((0.0, 0.0), (0.0, 0.0)), zncc=0.9, gyro=None, centre=None):
+    priors = Priors(gyro, *(centre or (None, float("inf"))))
     return judge(CFG, res or _result(), T, ref, aff[0], aff[1], zncc if isinstance(zncc, dict) else {"rgb": zncc},
-                 gyro)
+                 priors)
 
 
 def test_a_good_estimate_is_ok():
@@ -45,6 +46,7 @@ def test_a_good_estimate_is_ok():
     ({"zncc": 0.1}, LOST, "ZNCC"),  # below lost_zncc 0.15
     ({"zncc": 0.25}, DEGRADED, "ZNCC"),  # below min_zncc 0.3
     ({"gyro": se3_exp(np.array([0, 0, 0, 0.0, 0.06, 0]))}, DEGRADED, "gyro"),
+    ({"centre": (np.array([0.0, 0.0, 0.12]), 0.085)}, DEGRADED, "constant-velocity"),
     ({"res": _result(blocks={"rgb": BlockStats(1000, 1000, 900, 1, 1, 1),
                              "depth": BlockStats(800, 700, 100, 1, 1, 1)})}, DEGRADED, "depth term"),
 ])
@@ -55,6 +57,10 @@ def test_each_rule_alone(kwargs, level, words):
 
 def test_agreement_with_the_gyro_within_its_tolerance_is_ok():
     assert _judge(gyro=se3_exp(np.array([0, 0, 0, 0.0, 0.02, 0]))).level == OK  # 1.1 deg < 2 deg
+
+
+def test_a_centre_within_the_acceleration_reach_is_ok():
+    assert _judge(centre=(np.array([0.0, 0.05, 0.0]), 0.085)).level == OK
 
 
 def test_zncc_of_a_term_too_small_to_count_does_not_lose_the_frame():
