@@ -193,6 +193,10 @@ class TrackerConfig:
                               doc="depth residual (noise units) above which a point is an outlier")
     rotation_hypotheses_deg: float = _f(0.0, 0.0, 45.0, doc="besides constant and zero motion, start from the "
                                         "prediction rotated by +-this about each camera axis (0 = off)")
+    relocalisation_rings: int = _f(3, 1, 10, doc="relocalisation without a trusted velocity (the frame after a "
+                                   "(re)initialisation or a doubtful one) starts from rotations of k x max(2 x "
+                                   "rotation_hypotheses_deg, 4) deg about each camera axis, k = 1..rings: a robot "
+                                   "that starts tracking mid-bound turns 7-8 deg in that frame")
     refine_guesses: int = _f(1, 1, 32, doc="initial guesses optimised on the coarsest level before the best is kept")
     velocity_scales: tuple[float, ...] = _f((0.5, 1.5, 2.0, 3.0),
                                             doc="while the camera turns faster than fusion.rate_threshold_deg_s, also "

@@ -69,6 +69,11 @@ class MotionModel:
         return tuple(self._history)
 
     @property
+    def velocity_trusted(self) -> bool:
+        """The last motion comes from two trusted poses (else predictions from it are guesses)."""
+        return len(self._history) == 2 and all(self._trusted)
+
+    @property
     def last(self) -> tuple[int, np.ndarray] | None:
         return self._history[-1] if self._history else None
 

@@ -282,10 +282,15 @@ class Odometry:
     def _relocalise(self, prepared: PreparedFrame, predicted: np.ndarray, last: np.ndarray,
                     rs: RollingShutter | None, priors: Priors,
                     ev_frame: EventFrame | None) -> TrackingOutcome:
-        """Track again from wider starting points: the recent keyframes' poses and doubled rotation hypotheses."""
+        """Track again from wider starting points: the recent keyframes' poses and doubled rotation hypotheses
+        (``tracker.relocalisation_rings`` of them when the last motion is not trusted)."""
         cfg = self.config.tracker
         guesses = [predicted, *(se3_inv(kf.T_w_c) for kf in reversed(self.tracking.snapshot.keyframes[-3:]))]
-        guesses += rotation_hypotheses(predicted, max(2.0 * cfg.rotation_hypotheses_deg, 4.0))
+        step = max(2.0 * cfg.rotation_hypotheses_deg, 4.0)
+        # without a trusted velocity the prediction may be a whole frame's turn off (tracking starts mid-bound)
+        rings = 1 if self.motion.velocity_trusted else cfg.relocalisation_rings
+        for k in range(1, rings + 1):
+            guesses += rotation_hypotheses(predicted, k * step)
         return self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
 
     def _priors(self, stamp: int, gyro: np.ndarray | None) -> Priors:

@@ -277,3 +277,21 @@ def test_gyro_prior_brings_a_fast_turn_into_the_basin(room, imu_rotated):
             assert dt < 0.01 and dr < 0.2, (dt, dr)
     # with the gyro the first attempt converges; without it tracking fails and only relocalisation helps
     assert statuses == {True: TrackingStatus.OK, False: TrackingStatus.RELOCALISED}, statuses
+
+
+@pytest.mark.parametrize("angle_deg", [10.0, 12.0])
+def test_relocalisation_searches_wider_without_a_trusted_velocity(room, angle_deg):
+    """Tracking starts mid-bound: the second frame has turned 10-12 deg and there is no velocity yet. The
+    +-4 deg hypotheses alone end in a wrong optimum (measured 6.9 / 10.0 deg off, degraded); the rings at
+    8 and 12 deg bring it back (measured 0.06 / 0.02 deg)."""
+    T_w_c1 = se3_exp(np.r_[0.01, 0.0, 0.0, np.radians(angle_deg), 0.0, 0.0])
+    out = {}
+    for rings in (1, 3):
+        cfg = load_config("synthetic", overrides={"rig.T_base_rgb": np.eye(4).reshape(-1).tolist(),
+                                                  "tracker.relocalisation_rings": rings})
+        odo = Odometry(cfg, CAM)
+        odo.process_frame(_frame(room, CAM, np.eye(4), 0, ss=1))
+        r = odo.process_frame(_frame(room, CAM, T_w_c1, 33 * MS, ss=1))
+        out[rings] = (r.status, _err(r.T_odom_camera, T_w_c1)[1])
+    assert out[1][0] is not TrackingStatus.OK and out[1][1] > 3.0, out
+    assert out[3][0] is TrackingStatus.RELOCALISED and out[3][1] < 0.3, out
