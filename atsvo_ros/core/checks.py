@@ -59,6 +59,19 @@ class Verdict:
         return self.level == OK
 
 
+#: The image terms of Eq. 4 (the depth term is judged by its inlier fraction alone).
+IMAGE_TERMS = ("rgb", "ats")
+
+
+def failing_image_terms(config: AtsvoConfig, res: TrackResult) -> list[str]:
+    """The image terms of ``res`` under their own inlier counts (``rgb``: ``tracker.min_inliers`` and
+    ``min_inlier_fraction``; ``ats``: ``fusion.min_points`` and ``min_inlier_fraction``)."""
+    need = {"rgb": (config.tracker.min_inliers, config.tracker.min_inlier_fraction),
+            "ats": (config.fusion.min_points, config.fusion.min_inlier_fraction)}
+    return [n for n, b in res.blocks.items()
+            if n in need and b.n_inliers < max(need[n][0], need[n][1] * b.n_visible)]
+
+
 def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: np.ndarray,
           affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: dict[str, float],
           priors: Priors | None = None) -> Verdict:
@@ -75,10 +88,8 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
         return Verdict.lost("singular normal equations (no texture or depth structure constrains the pose)")
     # The image terms are judged apart: in fused mode a blurred colour image may fail while the ATS term
     # holds the pose; the frame is lost only when no image term constrains it.
-    image_terms = {n: b for n, b in res.blocks.items() if n in ("rgb", "ats")}
-    need = {"rgb": (cfg.min_inliers, cfg.min_inlier_fraction),
-            "ats": (config.fusion.min_points, config.fusion.min_inlier_fraction)}
-    failing = {n: b for n, b in image_terms.items() if b.n_inliers < max(need[n][0], need[n][1] * b.n_visible)}
+    image_terms = {n: b for n, b in res.blocks.items() if n in IMAGE_TERMS}
+    failing = {n: image_terms[n] for n in failing_image_terms(config, res)}
     if image_terms and len(failing) == len(image_terms):
         return Verdict.lost("; ".join(f"{b.n_inliers} {'photometric' if n == 'rgb' else 'ATS'} inliers of "
                                       f"{b.n_visible} visible map points" for n, b in failing.items()))
@@ -116,4 +127,4 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
     return Verdict(OK)
 
 
-__all__ = ["DEGRADED", "LOST", "OK", "Priors", "Verdict", "judge"]
+__all__ = ["DEGRADED", "IMAGE_TERMS", "LOST", "OK", "Priors", "Verdict", "failing_image_terms", "judge"]
