@@ -97,15 +97,7 @@ class MotionModel:
 
     def predict(self, stamp_ns: int) -> np.ndarray:
         """Constant-motion prediction of ``T_c_w`` (the last pose without motion history, identity before any)."""
-        if not self._history:
-            return np.eye(4)
-        s1, T1 = self._history[-1]
-        vel = self._velocity()
-        if vel is None:
-            return T1.copy()
-        xi, dt = vel
-        ratio = float(np.clip((stamp_ns - s1) / dt, 0.0, self.MAX_RATIO))
-        return se3_exp(ratio * xi) @ T1
+        return self.predict_scaled(stamp_ns, 1.0)
 
     def predict_scaled(self, stamp_ns: int, scale: float) -> np.ndarray:
         """The constant-motion prediction with the last motion scaled by ``scale`` (an accelerating or braking turn)."""
