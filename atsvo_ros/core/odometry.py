@@ -298,9 +298,7 @@ class Odometry:
         the constant-velocity camera centre with the reach of ``tracker.max_acceleration_m_s2``."""
         cfg = self.config.tracker
         centre = self.motion.centre_prior(stamp, cfg.max_acceleration_m_s2, cfg.motion_noise_m)
-        if centre is None:
-            return Priors(gyro)
-        return Priors(gyro, centre[0], centre[1])
+        return Priors(gyro) if centre is None else Priors(gyro, *centre)
 
     def motion_rates(self) -> tuple[float, float] | None:
         """The paper's relative-motion factor: camera angular rate (rad/s) and speed (m/s) over the last two frames.
