@@ -309,7 +309,7 @@ class MappingConfig:
 
 @dataclass(frozen=True)
 class NodeConfig:
-    """ROS node behaviour (ignored by the offline tools)."""
+    """ROS node behaviour (ignored by the offline tools, except ``imu_max_wait_s`` in the shared runtime)."""
 
     event_msg_type: str = _f("event_camera_msgs/msg/EventPacket",
                              choices=("event_camera_msgs/msg/EventPacket", "event_array_msgs/msg/EventArray",
@@ -323,6 +323,11 @@ class NodeConfig:
                              "reliable (reliable, keep all: every message of a reliable publisher arrives, a slow "
                              "node slows the publisher down; replaying a bag where every frame must count)")
     use_imu: bool = _f(True, doc="feed topics.imu's gyro to the motion prediction")
+    imu_max_wait_s: float = _f(0.25, 0.0, 10.0,
+                               doc="longest a paired frame waits (in stamp time) for the IMU sample after it; an "
+                                   "IMU further behind counts as silent and frames go without gyro (a dead IMU "
+                                   "costs this much latency once; samples arriving after their frame are dropped "
+                                   "and counted as imu_late)")
     publish_tf: bool = _f(True, doc="broadcast odom -> base_link on /tf")
     diagnostics_period_s: float = _f(1.0, 0.0, 3600.0, lo_open=True, doc="period of /diagnostics")
     executor: str = _f("events", choices=("events", "multi_threaded", "single_threaded"),

@@ -100,16 +100,7 @@ class RemoteMapping(EventMapsAhead):
         self.stats["sent"] += 1
         if not (wait or self.synchronous or request.reset):
             return None
-        deadline = time.monotonic() + self.timeout_s
-        with self._cond:
-            while self._answered < seq and not self._closed:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    self._give_up(seq)
-                    return None
-                self._cond.wait(left)
-            ready, self._ready = self._ready, None
-            return ready
+        return self.await_pending()
 
     def latest(self) -> MapSnapshot | None:
         with self._cond:
@@ -125,6 +116,18 @@ class RemoteMapping(EventMapsAhead):
                 self._give_up(seq)
                 return False
             return True
+
+    def await_pending(self) -> MapSnapshot | None:
+        with self._cond:
+            while self._pending is not None and not self._closed:
+                seq, sent = self._pending
+                left = sent + self.timeout_s - time.monotonic()
+                if left <= 0:
+                    self._give_up(seq)
+                    break
+                self._cond.wait(left)
+            ready, self._ready = self._ready, None
+            return ready
 
     def close(self) -> None:
         with self._cond:

@@ -4,7 +4,7 @@ Sensor data goes in as it arrives, in any interleaving: colour and depth images 
 sensor_msgs messages), event batches (or event messages, decoded here with the vectorised
 decoders), IMU samples and camera_info. The :class:`~atsvo_ros.io.sync.FrameAssembler` pairs colour
 with depth and cuts the event stream at frame stamps; the IMU stream is cut at the same stamps (a
-frame waits until the IMU has passed it, unless the IMU is silent for :attr:`OdometryRuntime.IMU_STALL_NS`),
+frame waits until the IMU has passed it, unless the IMU is ``node.imu_max_wait_s`` behind),
 so the core sees, for every frame, exactly the samples up to its exposure time whatever order they
 arrived in (the replay and the ROS node give the same poses). :meth:`OdometryRuntime.poll` runs the
 core on every frame that became complete and returns one :class:`RuntimeOutput` per frame; output
@@ -117,8 +117,6 @@ class OdometryRuntime:
     MAX_HELD_EVENT_MSGS = 2000
     #: IMU samples kept waiting for a frame (a stream without frames does not grow memory).
     IMU_KEEP_NS = 2_000_000_000
-    #: A frame waits for the IMU sample after it unless the IMU is this far behind the other streams.
-    IMU_STALL_NS = 100_000_000
 
     def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel | None = None,
                  event_camera: CameraModel | None = None, *, use_events: bool | None = None,
@@ -148,6 +146,7 @@ class OdometryRuntime:
         self._imu_mark_ns: int | None = None  # newest IMU stamp received
         self._await_imu: deque[tuple[RgbdFrame, EventBatch]] = deque()  # paired frames waiting for the IMU
         self._offset_ns = int(round(config.rgb_camera.time_offset_s * 1e9))
+        self._imu_wait_ns = int(round(config.node.imu_max_wait_s * 1e9))  # then the IMU counts as silent
         self._held: deque[FrameInput] = deque()  # frames waiting for the colour camera_info
         self._held_events: deque[tuple[Any, str, str]] = deque()  # event messages waiting for the event camera
         self._last_out: tuple[int, np.ndarray] | None = None
@@ -377,7 +376,7 @@ class OdometryRuntime:
         out = []
         mark = self._imu_mark_ns
         newest = self.assembler.newest_ns
-        stalled = mark is None or (newest is not None and newest - mark > self.IMU_STALL_NS)
+        stalled = mark is None or (newest is not None and newest - mark > self._imu_wait_ns)
         while self._await_imu:
             if not (final or stalled) and mark < int(self._await_imu[0][0].stamp_ns) + self._offset_ns:
                 break

@@ -288,7 +288,7 @@ def test_event_messages_wait_for_the_event_camera_info(bag):
 
 
 def test_a_silent_imu_does_not_hold_frames_back(bag):
-    """The IMU stops half way: frames wait at most IMU_STALL_NS of stream time for it, then go without."""
+    """The IMU stops half way: frames wait at most node.imu_max_wait_s of stream time for it, then go without."""
     from atsvo_ros.io.images import stamp_ns
 
     cfg, msgs = _rgbd_and_imu(bag)
@@ -300,7 +300,7 @@ def test_a_silent_imu_does_not_hold_frames_back(bag):
         outs += _poll_one(rt, cfg, item)
     n_frames = sum(1 for t, _ in msgs if t == cfg.topics.rgb)
     # every frame but the last few (within the stall window of the last image) is out before the flush
-    assert len(outs) >= n_frames - 1 - OdometryRuntime.IMU_STALL_NS // 33_000_000
+    assert len(outs) >= n_frames - 1 - int(cfg.node.imu_max_wait_s / 0.033)
     assert len(outs) + len(rt.flush()) == n_frames
 
 

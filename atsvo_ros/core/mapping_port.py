@@ -50,6 +50,14 @@ class MappingPort(Protocol):
         """A keyframe request is still being worked on (tracking sends no other meanwhile)."""
         ...
 
+    def await_pending(self) -> MapSnapshot | None:
+        """Wait for the keyframe request in progress: its snapshot (None when none is ready or it timed out).
+
+        Tracking calls it when a frame fails against a map that mapping is still extending: the camera has
+        outrun the map, and waiting for the keyframe beats relocalising against the old one.
+        """
+        ...
+
     def close(self) -> None:
         """Stop any worker."""
         ...
@@ -121,6 +129,9 @@ class InlineMapping(EventMapsAhead):
     def busy(self) -> bool:
         return False
 
+    def await_pending(self) -> MapSnapshot | None:
+        return None
+
     def close(self) -> None:
         self._event_maps.close()
 
@@ -160,11 +171,7 @@ class ThreadedMapping(EventMapsAhead):
             self._lock.notify_all()
             if not (wait or self.synchronous or request.reset):
                 return None
-            while self._pending is not None or self._working:
-                self._lock.wait()
-                self._raise()
-            ready, self._ready = self._ready, None
-            return ready
+            return self.await_pending()
 
     def latest(self) -> MapSnapshot | None:
         with self._lock:
@@ -175,6 +182,14 @@ class ThreadedMapping(EventMapsAhead):
     def busy(self) -> bool:
         with self._lock:
             return self._pending is not None or self._working
+
+    def await_pending(self) -> MapSnapshot | None:
+        with self._lock:
+            while self._pending is not None or self._working:
+                self._lock.wait()
+                self._raise()
+            ready, self._ready = self._ready, None
+            return ready
 
     def close(self) -> None:
         with self._lock:

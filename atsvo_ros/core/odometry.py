@@ -177,6 +177,13 @@ class Odometry:
         fused = self.tracking.uses_events(ev_frame)
         out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
         status = TrackingStatus.OK
+        if out.verdict.level != OK and self.mapping.busy():
+            # The camera outran the map while mapping still inserts a keyframe (asynchronous mapping behind):
+            # wait for that keyframe rather than relocalise against a map the camera has left.
+            newer = self.mapping.await_pending()
+            if newer is not None:
+                self.tracking.set_snapshot(newer)
+                out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
         if out.verdict.level != OK:
             # Not trusted: try harder before accepting a degraded pose or starting a new map.
             attempts = [(out, fused, TrackingStatus.DEGRADED)]

@@ -129,20 +129,24 @@ def _delivered(run: Run) -> bool:
     n = len(run.played.frame_stamps_ns)
     if run.diag is None:
         return True  # nothing to tell; _check_common reports the missing diagnostics
-    return min(int(run.diag["rgb_received"]), int(run.diag["depth_received"])) >= n and run.reset_ok is not False
+    # an IMU sample later than node.imu_max_wait_s behind the images missed its frame: delivery, not the node
+    return (min(int(run.diag["rgb_received"]), int(run.diag["depth_received"])) >= n and run.reset_ok is not False
+            and int(run.diag.get("count_imu_late", 0)) == 0)
 
 
 def _run_delivered(sequence, scripts: list[str], **kwargs) -> Run:
-    """:func:`_run`, once more when best-effort DDS lost frames before the node saw them.
+    """:func:`_run`, once more when DDS lost frames before the node saw them or delivered IMU samples too late.
 
     The checks count on every frame arriving. On a starved machine (the in-test player measured up to
-    1.1 s late, in 2 of ~6 CI runs) best-effort DDS loses bursts of frames that no loss event reports;
+    1.1 s late, in 2 of ~6 CI runs) best-effort DDS loses bursts of frames that no loss event reports,
+    and one CI run (reliable QoS) delivered 105 of 615 IMU samples more than 0.1 s behind the images;
     that is the transport, not the node, so such a run is repeated once (with a warning), never more.
     """
     run = _run(sequence, scripts, **kwargs)
     if not _delivered(run):
         warnings.warn(f"DDS lost frames ({run.diag['rgb_received']} of {len(run.played.frame_stamps_ns)} colour "
-                      f"images arrived, reset replay complete: {run.reset_ok}); running once more", stacklevel=2)
+                      f"images arrived, {run.diag.get('count_imu_late', 0)} IMU samples too late, reset replay "
+                      f"complete: {run.reset_ok}); running once more", stacklevel=2)
         run = _run(sequence, scripts, **kwargs)
     return run
 
@@ -215,8 +219,8 @@ def _ate(run: Run, gt: Trajectory) -> float:
 def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
     """mapping.synchronous + a queue that never drops: the node's odometry is the replay's, pose for pose."""
     _, replay, *_ = sequence
-    run = _run(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"],
-               reliable=True)
+    run = _run_delivered(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"],
+                         reliable=True)
     _check_common(run)
     d = run.diag
     assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
