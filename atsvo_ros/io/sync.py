@@ -24,7 +24,7 @@ from atsvo_ros.core.frame import RgbdFrame
 
 @dataclass
 class SyncStats:
-    """What the assembler had to drop or release early."""
+    """What the assembler had to drop or release early, and what never reached it."""
 
     frames: int = 0
     dropped_rgb: int = 0
@@ -33,6 +33,54 @@ class SyncStats:
     late_events: int = 0
     clock_jumps: int = 0
     dropped_events: int = 0
+    #: images missing from the streams, from gaps in their stamps (lost in transport, or never sent)
+    missing_rgb: int = 0
+    missing_depth: int = 0
+
+
+class StampGaps:
+    """Counts the images missing from a periodic stream from gaps between the stamps that arrive.
+
+    Best-effort transport loses images without telling the subscriber; a camera's stamps are periodic,
+    so a gap of k periods means k - 1 images missing. The period is a low percentile of the recent
+    intervals (robust to losses of up to about three in four); an image that arrives late into a gap
+    takes one back; a stamp far behind (a clock jump, a bag loop) starts over.
+    """
+
+    WINDOW = 32  # recent intervals kept for the period
+    GAP = 1.5  # an interval this many periods long (or more) holds missing images
+
+    def __init__(self, clock_jump_ns: int = 1_000_000_000) -> None:
+        self.missing = 0
+        self._clock_jump_ns = int(clock_jump_ns)
+        self._newest: int | None = None
+        self._intervals: deque[int] = deque(maxlen=self.WINDOW)
+
+    @property
+    def period_ns(self) -> int | None:
+        """The stream's period as measured (None before three intervals)."""
+        if len(self._intervals) < 3:
+            return None
+        return int(np.percentile(np.fromiter(self._intervals, np.int64), 25))
+
+    def add(self, stamp_ns: int) -> None:
+        """One image's stamp, in arrival order."""
+        t = int(stamp_ns)
+        if self._newest is None or t < self._newest - self._clock_jump_ns:
+            self._newest = t
+            self._intervals.clear()
+            return
+        if t <= self._newest:
+            if t < self._newest and self.missing > 0:
+                self.missing -= 1  # late into a gap counted as missing (a duplicate stamp is not)
+            return
+        dt = t - self._newest
+        period = self.period_ns
+        if period is not None and period > 0 and dt >= self.GAP * period:
+            self.missing += int(round(dt / period)) - 1
+        else:
+            self._intervals.append(dt)
+        self._newest = t
 
 
 class FrameAssembler:
@@ -61,15 +109,20 @@ class FrameAssembler:
         self._event_mark_ns: int | None = None  # the event stream is complete up to here
         self._last_cut_ns: int | None = None
         self._newest_ns = -(2**63)
+        self._gaps_rgb, self._gaps_depth = StampGaps(self.CLOCK_JUMP_NS), StampGaps(self.CLOCK_JUMP_NS)
 
     # ------------------------------------------------------------------ input
     def add_rgb(self, stamp_ns: int, rgb: np.ndarray) -> None:
         """A colour (H, W, 3 RGB uint8) or grey image at its header stamp."""
+        self._gaps_rgb.add(stamp_ns)
+        self.stats.missing_rgb = self._gaps_rgb.missing
         self._insert(self._rgb, int(stamp_ns), rgb)
         self._match()
 
     def add_depth(self, stamp_ns: int, depth_m: np.ndarray) -> None:
         """A depth image in float32 metres (0 = invalid) aligned to the colour image."""
+        self._gaps_depth.add(stamp_ns)
+        self.stats.missing_depth = self._gaps_depth.missing
         self._insert(self._depth, int(stamp_ns), depth_m)
         self._match()
 
@@ -239,4 +292,4 @@ class FrameAssembler:
         return RgbdFrame(stamp_ns=t, rgb=rgb, depth_m=depth), events
 
 
-__all__ = ["FrameAssembler", "SyncStats"]
+__all__ = ["FrameAssembler", "StampGaps", "SyncStats"]

@@ -131,6 +131,7 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path) -> dic
         "latency_ms_max": float(lat.max()) if len(lat) else None,
         "queue_drops": int(diag.get("queue_drops", 0)),
         "dds_lost_frames": n_frames - int(diag.get("rgb_received", frames_in)),
+        "node_missing_rgb": int(diag.get("missing_rgb", 0)),  # the node's own count, from stamp gaps
         "sync_dropped": int(diag.get("sync_dropped_rgb", 0)), "frames_waiting": int(diag.get("frames_waiting", 0)),
         "event_msgs_decoded": int(diag.get("count_event_msgs", 0)),
         "event_msgs_published": played.n_event_msgs,

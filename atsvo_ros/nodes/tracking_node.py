@@ -344,6 +344,7 @@ class TrackingNode(Node):
             "decoder_drops": sum(s["dropped_messages"] + s["dropped_out_of_range"] + s["dropped_backwards"]
                                  for s in dec.values()),
             "sync_dropped_rgb": sync.dropped_rgb, "sync_dropped_depth": sync.dropped_depth,
+            "missing_rgb": sync.missing_rgb, "missing_depth": sync.missing_depth,
             "frames_without_events": sync.released_without_events,
             "bad_snapshots": self.bad_snapshots,
             "keyframes": getattr(rt.core, "n_keyframes", 0) if rt.core is not None else 0,
@@ -361,7 +362,8 @@ class TrackingNode(Node):
         v = self.diagnostics_values()
         status = v["status"]
         level = OK
-        new_drops, self._drops_reported = v["queue_drops"] - self._drops_reported, v["queue_drops"]
+        drops = v["queue_drops"] + v["missing_rgb"] + v["missing_depth"]
+        new_drops, self._drops_reported = drops - self._drops_reported, drops
         if status in ("-", "initialising", "degraded", "relocalised", "reinitialised") or new_drops > 0:
             level = WARN
         if status == "lost" or not self.worker.alive or v["mapping"] == "mapping_node not found":

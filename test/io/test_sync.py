@@ -134,3 +134,45 @@ def test_events_waiting_for_frames_are_bounded_oldest_first():
     asm.add_events(EventBatch.empty(), complete_to_ns=100 * MS)
     [(frame, ev)] = asm.pop_ready()
     assert len(ev) == 25 and ev.t[0] == 75 * MS and ev.t[-1] == 99 * MS  # the newest 25
+
+
+def test_stamp_gaps_count_the_images_a_lossy_transport_dropped():
+    """30 Hz with 3 of every 10 images lost (what best-effort DDS delivered of 640x480 frames): all counted."""
+    from atsvo_ros.io.sync import StampGaps
+
+    period = 33_333_333
+    gaps = StampGaps()
+    kept = [k for k in range(300) if k < 10 or k % 10 not in (3, 4, 8)]
+    for k in kept:
+        gaps.add(1_700_000_000_000_000_000 + k * period + (k * 7919 % 2_000_000))  # 0-2 ms stamp jitter
+    assert gaps.missing == 300 - len(kept) == 87
+    assert abs(gaps.period_ns - period) < 2_000_000
+
+
+def test_stamp_gaps_take_back_a_late_image_and_start_over_after_a_clock_jump():
+    from atsvo_ros.io.sync import StampGaps
+
+    p, t0 = 33_000_000, 10_000_000_000
+    gaps = StampGaps()
+    for k in (0, 1, 2, 3, 5, 6):
+        gaps.add(t0 + k * p)
+    assert gaps.missing == 1
+    gaps.add(t0 + 4 * p)  # late, into the gap
+    gaps.add(t0 + 6 * p)  # a duplicate is not a late image
+    assert gaps.missing == 0
+    for k in (7, 8, 9, 12):
+        gaps.add(t0 + k * p)
+    assert gaps.missing == 2
+    for k in (0, 1, 2, 3):  # the bag loops (10 s back): a new timeline, nothing missing or late
+        gaps.add(k * p)
+    assert gaps.missing == 2 and gaps.period_ns == p  # measured anew on the new timeline
+
+
+def test_the_assembler_reports_images_missing_from_either_stream():
+    asm = FrameAssembler(RigConfig(sync_tolerance_s=0.005), with_events=False)
+    for k in range(10):
+        if k != 4:
+            asm.add_rgb(k * 33 * MS, _img(k))
+        if k not in (6, 7):
+            asm.add_depth(k * 33 * MS, _dep(1.0))
+    assert (asm.stats.missing_rgb, asm.stats.missing_depth) == (1, 2)
