@@ -45,6 +45,8 @@ class CameraConfig:
     readout_time_s: float = _f(0.0, 0.0, 1.0, doc="rolling-shutter readout time, first to last row (0 = global "
                                "shutter, e.g. the D455's colour and depth imagers)")
     time_offset_s: float = _f(0.0, -1.0, 1.0, doc="exposure time of the middle row minus the image stamp")
+    frame_clock_frames: int = _f(30, 0, 10000, doc="frames of the line fitted to the image stamps to recover the "
+                                 "camera's frame clock from host-stamp jitter (0 = use the stamps as they are)")
 
     def model(self):
         """The :class:`~atsvo_ros.core.camera.CameraModel` these values describe."""

@@ -30,6 +30,7 @@ from atsvo_ros.core.checks import DEGRADED, OK, Priors
 from atsvo_ros.core.event_frontend import EventFrame, EventFrontEnd
 from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
+from atsvo_ros.core.frame_clock import FrameClock
 from atsvo_ros.core.frontend import PreparedFrame, RgbdFrontEnd
 from atsvo_ros.core.geometry import hat, se3_exp, se3_inv, so3_log
 from atsvo_ros.core.imu import ImuBatch, gyro_rotation
@@ -107,6 +108,8 @@ class Odometry:
         self._affine = (0.0, 0.0)
         self._last_stamp: int | None = None
         self._offset_ns = int(round(config.rgb_camera.time_offset_s * 1e9))
+        self._clock = FrameClock(config.rgb_camera.frame_clock_frames)
+        self._shift_ns = 0  # exposure time minus stamp of the frame being processed
         #: Why the last frame was not ``ok`` (None when it was): for logs and diagnostics.
         self.last_loss_reason: str | None = None
 
@@ -150,9 +153,10 @@ class Odometry:
         t0 = time.perf_counter() - self._event_time_s
         self._event_time_s = 0.0
         n_events = self._events_since_frame
-        # Internally a frame lives at the time its image was exposed (middle row); the pose is published
-        # at the stamp (see _result).
-        stamp = int(frame.stamp_ns) + self._offset_ns
+        # Internally a frame lives at the time its image was exposed (middle row: the frame clock's time of
+        # the stamp plus the configured offset); the pose is published at the stamp (see _result).
+        stamp = self._clock(frame.stamp_ns) + self._offset_ns
+        self._shift_ns = stamp - int(frame.stamp_ns)
         prepared = self.frontend.prepare(frame)
         newer = self.mapping.latest()  # a keyframe mapping finished meanwhile (threaded or remote mapping)
         if newer is not None:
@@ -429,9 +433,9 @@ class Odometry:
     def _result(self, stamp: int, T_c_w: np.ndarray, out: TrackingOutcome | None, status: TrackingStatus,
                 t_track: float, kf: bool, fused: bool = False) -> OdometryResult:
         """The published result: the pose moved from the exposure time to the frame's stamp, in odom/base."""
-        if self._offset_ns:
-            T_c_w = se3_exp(-self._offset_ns * 1e-9 * self.motion.twist_per_s()) @ T_c_w
-            stamp -= self._offset_ns
+        if self._shift_ns:
+            T_c_w = se3_exp(-self._shift_ns * 1e-9 * self.motion.twist_per_s()) @ T_c_w
+            stamp -= self._shift_ns
         T_w_c = se3_inv(T_c_w)
         T_odom_cam = self.T_base_rgb @ T_w_c
         T_odom_base = T_odom_cam @ self.T_rgb_base

@@ -45,6 +45,9 @@ def add_nodes_args(p: argparse.ArgumentParser) -> None:
                    help="wall-clock period of the event packets whatever the playing rate, as a driver publishes "
                         "them (default 1 ms)")
     p.add_argument("--cache", default=None, help="where the sequence is simulated (default $ATSVO_CACHE)")
+    p.add_argument("--bag", default=None,
+                   help="play this atsvo-sim bag (robot layout, synthetic config) instead of simulating one, e.g. "
+                        "a long one for the memory trend")
     p.add_argument("--json", default=None, help="write the figures to this file")
 
 
@@ -52,6 +55,11 @@ def _sequence(args: argparse.Namespace) -> Path:
     from atsvo_ros.tools.demo import cache_dir
     from atsvo_ros.tools.sim import main as sim_main
 
+    if args.bag:
+        bag = Path(args.bag)
+        if not (bag / "metadata.yaml").is_file():
+            raise AtsvoError(f"--bag {bag}: not a ROS 2 bag directory (no metadata.yaml)")
+        return bag
     name = (f"nodes_{args.scenario}_{args.duration:g}s_seed{args.seed}_{args.width}x{args.height}"
             f"_ev{args.event_scale:g}")
     out = cache_dir(args.cache) / name

@@ -33,6 +33,9 @@ class RgbModel:
         readout_time_s: rolling-shutter readout, first to last row (0 = global shutter, as the D455's
             OV9782 colour imager; a Kinect v1's colour camera reads out over ~28 ms). Row ``r`` is exposed
             around ``stamp + readout (r / (H - 1) - 1/2)``: the stamp is the middle row's time.
+        stamp_jitter_s: scale of the delay between exposure and the reported stamp (half-normal): a driver
+            without hardware timestamps stamps each image when it reaches the host (OpenNI's Kinect in
+            TUM RGB-D: 1.8 ms rms off its frame clock); the D455 with global time stamps on the sensor (0).
     """
 
     max_blur_step_px: float = 1.0
@@ -46,12 +49,15 @@ class RgbModel:
     gain_limits: tuple[float, float] = (0.25, 8.0)
     vignetting: float = 0.35
     readout_time_s: float = 0.0
+    stamp_jitter_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.max_blur_step_px <= 0 or self.max_subframes < 1:
             raise SimulationError("max_blur_step_px must be > 0 and max_subframes >= 1")
         if not 0.0 <= self.readout_time_s <= 0.1:
             raise SimulationError(f"readout_time_s must be in [0, 0.1] s, got {self.readout_time_s}")
+        if not 0.0 <= self.stamp_jitter_s <= 0.005:
+            raise SimulationError(f"stamp_jitter_s must be in [0, 0.005] s, got {self.stamp_jitter_s}")
 
 
 @dataclass(frozen=True)

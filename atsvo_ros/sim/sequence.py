@@ -4,7 +4,8 @@
 stream to a bag. Streams, merged by stamp:
 
 * ground truth ``GroundTruth(stamp_ns, T_world_base)`` at ``gt_rate_hz``;
-* RGB-D ``RgbdFrame(stamp_ns, rgb, depth_mm)``: the stamp is the middle of the exposure; the
+* RGB-D ``RgbdFrame(stamp_ns, rgb, depth_mm)``: the stamp is the middle of the exposure (plus the
+  host-stamping delay ``RgbModel.stamp_jitter_s``, 0 by default); the
   colour image averages sub-frames spread over the exposure (no more than ``max_blur_step_px``
   apparent motion between two), the depth is rendered at the stamp;
 * events as :class:`EventBatch` packets of ``event_packet_s``, yielded when the packet is complete
@@ -166,8 +167,9 @@ class Simulation:
         self.scene = scene or make_scene(spec.seed, spec.texture_size)
         self.motion: Motion = make_motion(spec.scenario, spec.duration_s, spec.seed, self.scene.free_xy,
                                           t0_ns=spec.start_ns)
-        seeds = np.random.SeedSequence([spec.seed, 0x5E9]).spawn(4)
+        seeds = np.random.SeedSequence([spec.seed, 0x5E9]).spawn(5)
         self._rng_rgb, self._rng_depth, self._rng_events = (np.random.default_rng(s) for s in seeds[:3])
+        self._stamp_seed = seeds[4]
         self._imu_seed = seeds[3]
         dm = spec.depth_model
         self.depth_model = replace(dm, min_m=self.rig.config.rig.depth_min_m, max_m=self.rig.config.rig.depth_max_m)
@@ -238,6 +240,15 @@ class Simulation:
             for i in range(len(chunk)):
                 yield chunk.select(slice(i, i + 1))
 
+    def stamp_delays_ns(self, n: int, jitter_s: float | None = None) -> np.ndarray:
+        """Delay of each of the first ``n`` frames' stamps after its exposure (scale ``jitter_s``, by default
+        ``RgbModel.stamp_jitter_s``; the same draws for the same seed whatever the scale)."""
+        jitter_s = self.spec.rgb_model.stamp_jitter_s if jitter_s is None else float(jitter_s)
+        if jitter_s <= 0:
+            return np.zeros(n, np.int64)
+        rng = np.random.default_rng(self._stamp_seed)
+        return np.round(np.abs(rng.standard_normal(n)) * (jitter_s * 1e9)).astype(np.int64)
+
     def frames(self, stats: dict | None = None) -> Iterator[RgbdFrame]:
         """RGB-D frames at ``rate_hz`` (``stats['rgb_renders']`` counts the rendered sub-frames)."""
         spec, rig = self.spec, self.rig
@@ -251,6 +262,7 @@ class Simulation:
         # Sub-frames span the exposure, and with a rolling shutter the readout as well (each row then
         # averages the sub-frames inside its own exposure window; depth stays global shutter).
         half = int(round((spec.exposure_s + readout_s) * 0.5e9))
+        delays_ns = self.stamp_delays_ns(n)
         depth_prev = None
         for k in range(n):
             stamp = self.t_start_ns + int(round(k * 1e9 / spec.rate_hz))
@@ -278,7 +290,8 @@ class Simulation:
                 stats["rgb_renders"] = stats.get("rgb_renders", 0) + n_sub
             rgb = sensor.expose([acc * np.float32(1.0 / n_sub)], stamp)
             depth = depth_prev if depth_renderer is None else depth_renderer.render(poses[n_sub // 2])[1]
-            yield RgbdFrame(stamp, rgb, depth_to_mm(depth, self.depth_model, self._rng_depth))
+            # the image is exposed on the frame clock; a host-stamping driver reports it when it arrives
+            yield RgbdFrame(stamp + int(delays_ns[k]), rgb, depth_to_mm(depth, self.depth_model, self._rng_depth))
 
     def events(self, stats: dict | None = None) -> Iterator[EventBatch]:
         """Event packets of ``event_packet_s`` (empty packets are skipped), in time order.

@@ -128,7 +128,7 @@ def real_lines(seq: dict[str, Any] | None) -> list[str]:
     lines = [f"## Real RGB-D data: {Path(seq['folder']).name} ({seq['frames']} frames) against Open3D", "",
              "ATE after SE(3) alignment over all poses, RPE RMSE per frame (`evo` conventions); `ok & rel>1.5`: "
              "frames reported ok whose rotation over one frame is more than 1.5 deg wrong. `atsvo_ros:paper` is "
-             "the paper's formulation (photometric term only, global shutter).", "",
+             "the paper's formulation (photometric term only, global shutter, stamps as given).", "",
              *_table([h for _, h, _ in COLUMNS], [row_cells(r) for r in seq["rows"]])]
     lines += [f"Note: {n}" for n in seq.get("notes", [])] + ([""] if seq.get("notes") else [])
     return lines

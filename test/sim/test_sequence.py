@@ -251,3 +251,21 @@ def test_event_renders_never_let_the_scene_move_more_than_half_a_pixel():
     # ... and the rate really adapts: renders are dense during the flip, sparse when standing.
     gaps = np.diff(stamps)
     assert np.percentile(gaps, 95) > 10 * np.percentile(gaps, 5)
+
+
+def test_host_stamp_jitter_delays_the_stamps_not_the_images():
+    """``RgbModel.stamp_jitter_s``: the images stay on the frame clock, the stamps come later by half-normal
+    delays (the draws the tracking benchmark applies to cached frames with ``--stamp-jitter``)."""
+    from atsvo_ros.sim.sequence import make_simulation
+
+    spec = SequenceSpec(scenario="trot", duration_s=0.5, seed=2, **TINY)
+    jittered = dataclasses.replace(spec, rgb_model=dataclasses.replace(spec.rgb_model, stamp_jitter_s=0.002))
+    clean, late = list(make_simulation(spec).frames()), list(make_simulation(jittered).frames())
+    delays = np.array([b.stamp_ns - a.stamp_ns for a, b in zip(clean, late)])
+    assert len(delays) == 16 and np.all(delays >= 0) and 0.3e6 < delays.std() < 3e6
+    np.testing.assert_array_equal(delays, make_simulation(spec).stamp_delays_ns(16, 0.002))
+    for a, b in zip(clean, late):
+        np.testing.assert_array_equal(a.rgb, b.rgb)
+        np.testing.assert_array_equal(a.depth_mm, b.depth_mm)
+    with pytest.raises(SimulationError):
+        dataclasses.replace(spec.rgb_model, stamp_jitter_s=0.02)
