@@ -22,6 +22,14 @@ def _plt():
     return plt
 
 
+def _save(plt, fig, path: Path) -> Path:
+    """Lay out, write (PNG, 110 dpi) and close ``fig``; ``path``."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def rpy_deg(T: np.ndarray) -> np.ndarray:
     """Roll, pitch, yaw (ZYX, degrees) of (N, 4, 4) poses, continuous over time.
 
@@ -80,10 +88,7 @@ def plot_run(out_dir: str | Path, est: Trajectory, result: EvalResult | None = N
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
     fig.suptitle(title or "trajectory")
-    fig.tight_layout()
-    paths.append(out / "trajectory.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(_save(plt, fig, out / "trajectory.png"))
 
     for name, values, unit, labels in (("position", lambda T: T[:, :3, 3], "m", "xyz"),
                                        ("orientation", rpy_deg, "deg", ("roll", "pitch", "yaw"))):
@@ -101,10 +106,7 @@ def plot_run(out_dir: str | Path, est: Trajectory, result: EvalResult | None = N
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel("time [s]")
         fig.suptitle(f"{title} {name}".strip())
-        fig.tight_layout()
-        paths.append(out / f"{name}.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        paths.append(_save(plt, fig, out / f"{name}.png"))
 
     if result is not None:
         fig, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
@@ -122,10 +124,7 @@ def plot_run(out_dir: str | Path, est: Trajectory, result: EvalResult | None = N
         axes[-1].set_xlabel("time [s]")
         m = result.metrics
         fig.suptitle(f"{title} ATE {m['ate_rmse_m'] * 100:.2f} cm".strip())
-        fig.tight_layout()
-        paths.append(out / "error.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        paths.append(_save(plt, fig, out / "error.png"))
     return paths
 
 
@@ -178,10 +177,28 @@ def plot_comparison(path: str | Path, runs: dict[str, EvalResult], title: str = 
     ax.grid(True, alpha=0.3, which="both")
     ax.legend(loc="best", fontsize=8)
     fig.suptitle(title or "comparison")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
-__all__ = ["plot_comparison", "plot_run", "rpy_deg"]
+def plot_memory(path: str | Path, runs: dict[str, np.ndarray], title: str = "") -> Path:
+    """Resident memory over time of several runs (``label -> (N, 2)`` of seconds, MB) in one figure.
+
+    What a soak test is judged by: a leak is a line that keeps rising after the start-up plateau.
+    """
+    plt = _plt()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(9, 4))
+    for (label, series), colour in zip(runs.items(), _COLOURS):
+        series = np.asarray(series, dtype=float).reshape(-1, 2)
+        ax.plot(series[:, 0], series[:, 1], "-", color=colour, lw=1.2, label=label)
+    ax.set_xlabel("time since publishing started [s]")
+    ax.set_ylabel("resident memory [MB]")
+    ax.set_ylim(bottom=0)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title or "memory")
+    return _save(plt, fig, path)
+
+
+__all__ = ["plot_comparison", "plot_memory", "plot_run", "rpy_deg"]

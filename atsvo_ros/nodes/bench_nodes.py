@@ -11,14 +11,15 @@ images and IMU, and the events re-cut into packets that still go out every milli
 sends them). Per run: latency from a frame's stamp (the time it was due on the publishing
 clock) to its odometry at the subscriber, p50/p99/max; frames dropped by the node's queue (counted),
 by DDS (published, never received) and still waiting; the node processes' resident memory over time
-(first, last, max, and the slope over the second half). Needs the ``ros`` extra and the event messages
-(.ci/ros_env.sh); the simulated sequence is cached in ``$ATSVO_CACHE``.
+(first, last, max, and the slope over the second half; the series in the JSON and a plot beside it).
+``--repeat N`` loops the sequence in the load runs with time running on: a soak test from a short
+bag. Needs the ``ros`` extra and the event messages (.ci/ros_env.sh); the simulated sequence is
+cached in ``$ATSVO_CACHE``.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -48,6 +49,10 @@ def add_nodes_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bag", default=None,
                    help="play this atsvo-sim bag (robot layout, synthetic config) instead of simulating one, e.g. "
                         "a long one for the memory trend")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="play the sequence this many times back to back in each load run (stamps moved on, so "
+                        "time keeps running; the scene jumps back to its start at each loop): a long run from "
+                        "a short bag, for the memory trend (default 1)")
     p.add_argument("--json", default=None, help="write the figures to this file")
 
 
@@ -73,51 +78,27 @@ def _sequence(args: argparse.Namespace) -> Path:
     return out
 
 
-def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path) -> dict[str, Any]:
-    """One run: start the nodes, publish at ``rate`` x real time, measure, stop."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import MultiThreadedExecutor
-
+def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path, repeat: int = 1) -> dict[str, Any]:
+    """One run: start the nodes, publish ``repeat`` passes at ``rate`` x real time, measure, stop."""
     from atsvo_ros.config import load_config
-    from atsvo_ros.nodes.player import BagPlayer, NodeProcesses, OdometryProbe
+    from atsvo_ros.nodes.player import node_session
 
     cfg = load_config("synthetic")
-    t = cfg.topics
     scripts = ["mapping_node", "tracking_node"] if args.split else ["atsvo_node"]
     ros_args = ["--ros-args", "--params-file", str(_params_file()), "-p", f"node.queue_size:={args.queue_size}",
                 "-p", f"mode:={args.mode}", "-p", "node.diagnostics_period_s:=0.5"]
-    procs = NodeProcesses(scripts, ros_args, log_dir)
-    context = Context()
-    rclpy.init(context=context)
-    executor = None
-    try:
-        node = rclpy.create_node("atsvo_bench_probe", context=context)
-        player = BagPlayer(node, bag, [t.rgb, t.depth, t.rgb_info, t.event_info, t.events, t.imu], t.rgb, t.depth,
-                           t.events)
-        probe = OdometryProbe(node, cfg)
-        executor = MultiThreadedExecutor(num_threads=2, context=context)
-        executor.add_node(node)
-        threading.Thread(target=executor.spin, daemon=True).start()
-        if not player.wait_for_subscribers(120.0):
-            raise AtsvoError("the nodes did not subscribe within 120 s: " + procs.log_tail())
-        if args.split and not probe.wait(lambda: (probe.diag("odometry") or {}).get("mapping") == "connected", 60):
-            raise AtsvoError("tracking_node did not find mapping_node: " + procs.log_tail())
-        time.sleep(1.0)
+    with node_session(bag, cfg, scripts, ros_args, log_dir, start_timeout_s=120.0, name="atsvo_bench_probe") as run:
+        player, probe, procs = run.player, run.probe, run.procs
         t_start = time.monotonic()
-        played = player.play(rate=rate, event_packet_wall_s=args.event_packet_ms * 1e-3)
+        played = player.play(rate=rate, event_packet_wall_s=args.event_packet_ms * 1e-3, repeat=repeat)
         t_played = time.monotonic()
         probe.wait_idle(len(played.frame_stamps_ns) - 1, idle_s=3.0)
         n_diag = probe.diagnostics_count
         probe.wait(lambda: probe.diagnostics_count > n_diag + 1, 5.0)
         diag = probe.diag("atsvo_tracking: odometry") or {}
-        with probe._lock:
-            received = list(probe.odometry)
-    finally:
-        codes = procs.stop()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        rclpy.try_shutdown(context=context)
+        received = probe.received()
+        statuses = probe.statuses()
+    codes = run.exit_codes
     lat = np.array([(tr - played.scheduled_s[m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec]) * 1e3
                     for tr, m in received if (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
                     in played.scheduled_s])
@@ -129,7 +110,7 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path) -> dic
     slope = float(np.polyfit(half[:, 0], half[:, 1], 1)[0]) * 60.0 if len(half) > 2 else float("nan")
     span_s = (played.frame_stamps_ns[-1] - played.frame_stamps_ns[0]) * 1e-9 if n_frames > 1 else 0.0
     return {
-        "rate_x_real_time": rate, "published_frames": n_frames,
+        "rate_x_real_time": rate, "passes": repeat, "run_s": t_played - t_start, "published_frames": n_frames,
         "publish_fps": (n_frames - 1) / max(t_played - t_start, 1e-9),
         "scheduled_fps": (n_frames - 1) / max(span_s / rate, 1e-9),
         "publisher_lag_ms_p99": float(np.percentile(played.lag_s, 99) * 1e3),
@@ -147,7 +128,9 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path) -> dic
         "tracking_ms_p50": float(diag.get("tracking_time_ms_p50", "nan")),
         "rss_mb_first": float(rss[0, 1]) if len(rss) else None, "rss_mb_last": float(rss[-1, 1]) if len(rss) else None,
         "rss_mb_max": float(rss[:, 1].max()) if len(rss) else None, "rss_mb_per_min_second_half": slope,
+        "statuses": {k: statuses.count(k) for k in sorted(set(statuses))},
         "exit_codes": codes,
+        "rss_mb_series": [[round(float(a), 2), round(float(b), 1)] for a, b in rss[::max(1, len(rss) // 400)]],
     }
 
 
@@ -189,8 +172,9 @@ def main_nodes(args: argparse.Namespace) -> int:
           f"(recording: {recorded_fps:.1f})", flush=True)
     for load in args.loads:
         rate = load * sustainable_fps / recorded_fps
-        print(f"{load:g}x sustainable: publishing at {rate:.2f}x real time", flush=True)
-        results["runs"][f"{load:g}x"] = _run(bag, args, rate, log_dir)
+        print(f"{load:g}x sustainable: publishing at {rate:.2f}x real time"
+              + (f", {args.repeat} passes" if args.repeat > 1 else ""), flush=True)
+        results["runs"][f"{load:g}x"] = _run(bag, args, rate, log_dir, args.repeat)
     header = ("| run | x real time | frames/s due / sent | odometry / frames | latency ms p50 / p99 / max | "
               "queue drops | DDS lost | event msgs decoded | RSS MB (all node processes) | exit |")
     print()
@@ -199,8 +183,15 @@ def main_nodes(args: argparse.Namespace) -> int:
     for name, r in results["runs"].items():
         print(_row(name, r))
     if args.json:
+        from atsvo_ros.eval.plots import plot_memory
+
         Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
-        print(f"wrote {args.json}")
+        png = plot_memory(Path(args.json).with_suffix(".rss.png"),
+                          {f"{name} ({r['rate_x_real_time']:.2f}x real time, {r['passes']} pass"
+                           f"{'es' if r['passes'] > 1 else ''})": np.array(r["rss_mb_series"])
+                           for name, r in results["runs"].items()},
+                          f"{results['nodes']}, {results['mode']}: RSS of the node processes")
+        print(f"wrote {args.json} and {png}")
     return 0
 
 

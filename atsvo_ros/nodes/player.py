@@ -16,7 +16,8 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from atsvo_ros.errors import AtsvoError
 from atsvo_ros.nodes._ros import LATCHED_QOS, OUTPUT_QOS, RELIABLE_INPUT_QOS, SENSOR_QOS
 
 
@@ -127,39 +129,69 @@ class BagPlayer:
         return sorted(rest + packets, key=lambda m: m[0])
 
     def play(self, rate: float = 1.0, first: int = 0, last: int | None = None,
-             event_packet_wall_s: float | None = None) -> Played:
+             event_packet_wall_s: float | None = None, repeat: int = 1) -> Played:
         """Publish messages ``first:last`` at ``rate`` x their recorded timing; blocks until done.
 
         ``event_packet_wall_s``: re-cut the event stream so packets go out at this wall-clock period
-        whatever the rate (see :meth:`repacketized`).
+        whatever the rate (see :meth:`repacketized`). ``repeat``: play the messages that many times
+        back to back, each pass with its stamps and event times moved on by the length of the
+        recording, so time keeps running (a long run from a short bag; the scene jumps back at each
+        loop as if the robot were carried to its start).
         """
         base = self.repacketized(event_packet_wall_s * rate) if event_packet_wall_s else self.messages
         msgs = base[first:last]
         out = Played()
         if not msgs:
             return out
+        if repeat < 1:
+            raise ValueError(f"repeat must be >= 1, got {repeat}")
+        restamp = self._restamper() if repeat > 1 else None
+        stamps = [m[3] for m in msgs if m[1] == self.rgb_topic]
+        loop_ns = (stamps[-1] - stamps[0]) * len(stamps) // max(len(stamps) - 1, 1) if len(stamps) > 1 else 0
         t_bag0 = msgs[0][0]
         t0 = time.monotonic() + 0.05
         pending: dict[int, int] = {}
-        for t, topic, raw, stamp in msgs:
-            due = t0 + (t - t_bag0) * 1e-9 / rate
-            wait = due - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
-            self.publishers[topic].publish(raw)
-            now = time.monotonic()
-            if topic == self.events_topic:
-                out.n_event_msgs += 1
-            out.lag_s.append(now - due)
-            out.n_messages += 1
-            if stamp is not None:
-                if topic == self.rgb_topic:
-                    out.frame_stamps_ns.append(stamp)
-                    out.scheduled_s[stamp] = t0 + (stamp - t_bag0) * 1e-9 / rate
-                pending[stamp] = pending.get(stamp, 0) + 1
-                if pending[stamp] == 2:
-                    out.frame_sent_s[stamp] = now
+        for k in range(repeat):
+            shift = k * loop_ns
+            for t, topic, raw, stamp in msgs:
+                due = t0 + (t + shift - t_bag0) * 1e-9 / rate
+                wait = due - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+                self.publishers[topic].publish(restamp(topic, raw, shift) if shift else raw)
+                now = time.monotonic()
+                if topic == self.events_topic:
+                    out.n_event_msgs += 1
+                out.lag_s.append(now - due)
+                out.n_messages += 1
+                if stamp is not None:
+                    stamp += shift
+                    if topic == self.rgb_topic:
+                        out.frame_stamps_ns.append(stamp)
+                        out.scheduled_s[stamp] = t0 + (stamp - t_bag0) * 1e-9 / rate
+                    pending[stamp] = pending.get(stamp, 0) + 1
+                    if pending[stamp] == 2:
+                        out.frame_sent_s[stamp] = now
         return out
+
+    def _restamper(self) -> Callable[[str, bytes, int], bytes]:
+        """``(topic, raw, shift_ns) -> raw`` moved in time, for every topic this player publishes."""
+        from atsvo_ros.io.msgtypes import typestore
+        from atsvo_ros.io.restamp import restamp_event_packet, restamp_header
+
+        encoding = None
+        if self.events_topic in self.publishers:
+            if not (self._events_msgtype or "").endswith("EventPacket"):
+                raise ValueError(f"cannot loop {self._events_msgtype}: per-event stamps (EventPacket only)")
+            first = next(m[2] for m in self.messages if m[1] == self.events_topic)
+            encoding = typestore().deserialize_cdr(first, self._events_msgtype).encoding
+
+        def restamp(topic: str, raw: bytes, shift_ns: int) -> bytes:
+            if topic == self.events_topic:
+                return restamp_event_packet(raw, shift_ns, encoding)
+            return restamp_header(raw, shift_ns)
+
+        return restamp
 
 
 class OdometryProbe:
@@ -241,6 +273,16 @@ class OdometryProbe:
                 break
             time.sleep(0.05)
         return len(self.odometry)
+
+    def received(self) -> list[tuple[float, Any]]:
+        """A copy of the odometry received so far: ``(monotonic receipt time, msg)``."""
+        with self._lock:
+            return list(self.odometry)
+
+    def statuses(self, since: int = 0) -> list[str]:
+        """The per-frame status (``ok``, ``degraded``, ...) of each status message received (from ``since``)."""
+        with self._lock:
+            return [m.status[0].message for m in self.status[since:]]
 
     def poses(self, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Stamps (ns) and 4x4 ``T_odom_base`` of the odometry received (from index ``since``)."""
@@ -325,4 +367,60 @@ class NodeProcesses:
         return codes
 
 
-__all__ = ["BagPlayer", "NodeProcesses", "OdometryProbe", "Played", "console_script", "message_class", "rss_mb"]
+@dataclass
+class NodeSession:
+    """What :func:`node_session` hands its caller; ``exit_codes`` is filled when the session ends."""
+
+    player: BagPlayer
+    probe: OdometryProbe
+    procs: NodeProcesses
+    exit_codes: list[int] = field(default_factory=list)
+
+
+@contextmanager
+def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: list[str], log_dir: str | Path, *,
+                 reliable: bool = False, debug_images: bool = False, start_timeout_s: float = 60.0,
+                 name: str = "atsvo_probe") -> Iterator[NodeSession]:
+    """Start ``scripts`` with ``ros_args``, a player of ``bag`` and a probe; yield once both ends are matched.
+
+    The probe spins in its own DDS context (a multi-threaded executor on a daemon thread). Raises
+    :class:`AtsvoError` with the nodes' log tail when they do not subscribe (or, split, do not find
+    each other) within ``start_timeout_s``. On exit the nodes get Ctrl-C and the context shuts down.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import MultiThreadedExecutor
+
+    t = config.topics
+    procs = NodeProcesses(scripts, ros_args, log_dir)
+    context = Context()
+    rclpy.init(context=context)
+    executor = None
+    session = None
+    try:
+        node = rclpy.create_node(name, context=context)
+        player = BagPlayer(node, bag, [t.rgb, t.depth, t.rgb_info, t.event_info, t.events, t.imu], t.rgb, t.depth,
+                           t.events, reliable=reliable)
+        probe = OdometryProbe(node, config, debug_images=debug_images)
+        executor = MultiThreadedExecutor(num_threads=2, context=context)
+        executor.add_node(node)
+        threading.Thread(target=executor.spin, daemon=True).start()
+        if not player.wait_for_subscribers(start_timeout_s):
+            raise AtsvoError(f"the nodes did not subscribe within {start_timeout_s:g} s: " + procs.log_tail())
+        if "tracking_node" in scripts and not probe.wait(
+                lambda: (probe.diag("odometry") or {}).get("mapping") == "connected", start_timeout_s):
+            raise AtsvoError(f"tracking_node did not find mapping_node: {probe.diag('odometry')} " + procs.log_tail())
+        time.sleep(1.0)  # a reader can match a moment after its writer did
+        session = NodeSession(player, probe, procs)
+        yield session
+    finally:
+        codes = procs.stop()
+        if session is not None:
+            session.exit_codes = codes
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        rclpy.try_shutdown(context=context)
+
+
+__all__ = ["BagPlayer", "NodeProcesses", "NodeSession", "OdometryProbe", "Played", "console_script", "message_class",
+           "node_session", "rss_mb"]

@@ -5,7 +5,7 @@ import numpy as np
 
 from atsvo_ros.core.geometry import so3_exp
 from atsvo_ros.eval.metrics import EvalOptions, evaluate
-from atsvo_ros.eval.plots import plot_comparison, plot_run, rpy_deg
+from atsvo_ros.eval.plots import plot_comparison, plot_memory, plot_run, rpy_deg
 from atsvo_ros.io.trajectory import Trajectory
 
 
@@ -51,3 +51,10 @@ def test_plot_comparison_draws_every_run_against_ground_truth(tmp_path):
     assert img.shape[0] > 500 and img.shape[1] > 800 and img.std() > 0.05  # a drawn figure, not a blank page
     with pytest.raises(ValueError):
         plot_comparison(tmp_path / "d.png", {})
+
+
+def test_plot_memory_writes_one_png_for_several_runs(tmp_path):
+    t = np.linspace(0.0, 60.0, 50)
+    runs = {"real time": np.stack([t, 280 + 5 * t], 1), "3x": np.stack([t, 300 + 0 * t], 1).tolist()}
+    path = plot_memory(tmp_path / "sub" / "rss.png", runs, "soak")
+    assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000

@@ -16,7 +16,6 @@ import json
 import os
 import signal
 import subprocess
-import threading
 import time
 import warnings
 from dataclasses import dataclass
@@ -28,14 +27,12 @@ import pytest
 rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (pip install -e '.[ros]'; docs/ros_env.md)")
 pytest.importorskip("event_camera_msgs.msg", reason="event_camera_msgs not built: source .ci/ros_env.sh")
 
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 
 from atsvo_ros.config import load_config  # noqa: E402
 from atsvo_ros.core.geometry import so3_log  # noqa: E402
 from atsvo_ros.eval.metrics import EvalOptions, evaluate  # noqa: E402
 from atsvo_ros.io.trajectory import Trajectory, read_tum  # noqa: E402
-from atsvo_ros.nodes.player import BagPlayer, NodeProcesses, OdometryProbe, Played, console_script  # noqa: E402
+from atsvo_ros.nodes.player import BagPlayer, OdometryProbe, Played, console_script, node_session  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 PARAMS = ROOT / "config" / "synthetic.yaml"
@@ -81,29 +78,12 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
          debug_images: bool = False, reliable: bool = False) -> Run:
     bag, *_, base = sequence
     cfg = load_config("synthetic")
-    t = cfg.topics
     args = ["--ros-args", "--params-file", str(PARAMS), "-p", f"mapping.synchronous:={str(synchronous).lower()}",
             "-p", f"node.queue_size:={queue_size}", "-p", "node.diagnostics_period_s:=0.25",
             "-p", f"node.sensor_qos:={'reliable' if reliable else 'best_effort'}"]
-    procs = NodeProcesses(scripts, args, base / "logs")
-    context = Context()
-    rclpy.init(context=context)
-    executor = None
-    try:
-        node = rclpy.create_node("atsvo_test_probe", context=context)
-        player = BagPlayer(node, bag, [t.rgb, t.depth, t.rgb_info, t.event_info, t.events, t.imu], t.rgb, t.depth,
-                           reliable=reliable)
-        probe = OdometryProbe(node, cfg, debug_images=debug_images)
-        executor = MultiThreadedExecutor(num_threads=2, context=context)
-        executor.add_node(node)
-        threading.Thread(target=executor.spin, daemon=True).start()
-        assert player.wait_for_subscribers(START_TIMEOUT_S), "the tracking node did not subscribe: " + \
-            procs.log_tail()
-        if "tracking_node" in scripts:
-            assert probe.wait(lambda: (probe.diag("odometry") or {}).get("mapping") == "connected", START_TIMEOUT_S), \
-                f"tracking_node never saw mapping_node: {probe.diag('odometry')}"
-        # Both ends of every topic matched (a reader can match a moment after its writer did).
-        time.sleep(1.0)
+    with node_session(bag, cfg, scripts, args, base / "logs", reliable=reliable, debug_images=debug_images,
+                      start_timeout_s=START_TIMEOUT_S, name="atsvo_test_probe") as session:
+        player, probe, procs = session.player, session.probe, session.procs
         played = player.play(rate=1.0)
         n_frames = len(played.frame_stamps_ns)
         probe.wait_idle(n_frames - 1, idle_s=4.0)
@@ -111,15 +91,9 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
         assert probe.wait(lambda: probe.diagnostics_count > n_diag + 1, 10.0), "no /diagnostics"
         diag = probe.diag("atsvo_tracking: odometry")
         stamps, poses = probe.poses()
-        statuses = [s.status[0].message for s in probe.status]
-        reset_ok = None
-        if check_reset:
-            reset_ok = _check_reset(player, probe)
-    finally:
-        codes = procs.stop()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        rclpy.try_shutdown(context=context)
+        statuses = probe.statuses()
+        reset_ok = _check_reset(player, probe) if check_reset else None
+    codes = session.exit_codes
     logs = [Path(log).read_text() for log in procs.logs]
     return Run(played, probe, stamps, poses, diag, statuses, reset_ok, codes, logs, reliable)
 
@@ -161,7 +135,7 @@ def _check_reset(player: BagPlayer, probe: OdometryProbe) -> bool:
     played = player.play(rate=1.0, last=last)
     probe.wait_idle(n0 + len(played.frame_stamps_ns), idle_s=3.0)
     stamps, poses = probe.poses(since=n0)
-    statuses = [s.status[0].message for s in probe.status[n0:]]
+    statuses = probe.statuses(since=n0)
     # the frame the first run left waiting goes first (at the identity of the new start), then the replayed ones
     if len(stamps) < len(played.frame_stamps_ns) - 1:
         return False  # frames lost on the way (see _run_delivered); the caller repeats the run once
