@@ -264,9 +264,11 @@ class FusionConfig:
     rate_threshold_deg_s: float = _f(150.0, 0.0, 10000.0,
                                      doc="camera angular rate over the last two frames (or the gyro's) above which "
                                          "the event term is used: 5 deg per frame at 30 Hz, about where RGB-D "
-                                         "tracking with the depth term stops holding; below it the 320x240 ATS "
-                                         "term added error (synthetic backflip/bound/running, seeds 0-2: mean ATE "
-                                         "4.8 / 3.2 / 2.4 / 3.8 cm at 90 / 120 / 150 / 180 deg/s)")
+                                         "tracking with the depth term stops holding. Re-measured November 2026 "
+                                         "(synthetic backflip/bound/pronk/running, 10 s): mean ATE seeds 0-2 "
+                                         "1.71 / 1.53 / 1.45 cm at 150 / 220 / 300 deg/s (bound and running peak "
+                                         "at 250-285 deg/s, the flip at 560-580), but on seeds 3-4 300 was worse "
+                                         "(bound 1.87 -> 3.16, backflip 3.87 -> 4.75 cm): not a robust gain, kept")
     speed_threshold_m_s: float = _f(1.5, 0.0, 100.0,
                                     doc="camera speed over the last two frames above which the event term is used")
     sigma: float = _f(12.0, 0.0, 255.0, lo_open=True, doc="noise scale of an ATS residual (0-255 units)")
