@@ -40,6 +40,7 @@ from atsvo_ros.core.events import EventBatch
 from atsvo_ros.core.frame import OdometryResult, RgbdFrame
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import AtsvoError
+from atsvo_ros.io.restamp import cdr_stamp_ns
 from atsvo_ros.io.ros_out import body_twist
 from atsvo_ros.io.sync import FrameAssembler
 
@@ -245,7 +246,7 @@ class OdometryRuntime:
         self.counters["event_msgs"] += 1
         if isinstance(msg, (bytes, bytearray, memoryview)):
             batch = dec.decode_raw(msg)
-            mark = _cdr_stamp_ns(msg)
+            mark = cdr_stamp_ns(msg)
         else:
             batch = dec.decode_message(msg)
             try:
@@ -467,24 +468,13 @@ def _msg_stamp(msg: Any) -> str:
 def _any_stamp_ns(msg: Any) -> int | None:
     """header.stamp of a message object or of its serialized bytes (None when there is none)."""
     if isinstance(msg, (bytes, bytearray, memoryview)):
-        return _cdr_stamp_ns(msg)
+        return cdr_stamp_ns(msg)
     from atsvo_ros.io.images import stamp_ns
 
     try:
         return stamp_ns(msg)
     except (AttributeError, TypeError, ValueError):
         return None
-
-
-def _cdr_stamp_ns(raw: bytes | bytearray | memoryview) -> int | None:
-    """header.stamp of a serialized ROS 2 message whose first field is a std_msgs/Header."""
-    import struct
-
-    if len(raw) < 12:
-        return None
-    order = "<" if bytes(raw[1:2]) == b"\x01" else ">"
-    sec, nanosec = struct.unpack_from(order + "iI", raw, 4)
-    return sec * 1_000_000_000 + nanosec
 
 
 __all__ = ["FrameInput", "Logger", "OdometryCore", "OdometryRuntime", "RuntimeOutput", "Sink"]

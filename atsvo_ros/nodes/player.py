@@ -27,6 +27,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from atsvo_ros.errors import AtsvoError
+from atsvo_ros.io.restamp import cdr_stamp_ns, restamp_event_packet, restamp_header
 from atsvo_ros.nodes._ros import LATCHED_QOS, OUTPUT_QOS, RELIABLE_INPUT_QOS, SENSOR_QOS
 
 
@@ -77,10 +78,7 @@ class BagPlayer:
                     self._events_msgtype = c.msgtype
             for conn, t, raw in reader.messages(connections=conns):
                 raw = bytes(raw)
-                stamp = None
-                if conn.topic in (rgb_topic, depth_topic):
-                    sec, nsec = np.frombuffer(raw, "<i4", 1, 4)[0], np.frombuffer(raw, "<u4", 1, 8)[0]
-                    stamp = int(sec) * 1_000_000_000 + int(nsec)
+                stamp = cdr_stamp_ns(raw) if conn.topic in (rgb_topic, depth_topic) else None
                 self.messages.append((int(t), conn.topic, raw, stamp))
 
     @property
@@ -139,12 +137,12 @@ class BagPlayer:
         loop as if the robot were carried to its start).
         """
         base = self.repacketized(event_packet_wall_s * rate) if event_packet_wall_s else self.messages
+        if repeat < 1:
+            raise ValueError(f"repeat must be >= 1, got {repeat}")
         msgs = base[first:last]
         out = Played()
         if not msgs:
             return out
-        if repeat < 1:
-            raise ValueError(f"repeat must be >= 1, got {repeat}")
         restamp = self._restamper() if repeat > 1 else None
         stamps = [m[3] for m in msgs if m[1] == self.rgb_topic]
         loop_ns = (stamps[-1] - stamps[0]) * len(stamps) // max(len(stamps) - 1, 1) if len(stamps) > 1 else 0
@@ -177,7 +175,6 @@ class BagPlayer:
     def _restamper(self) -> Callable[[str, bytes, int], bytes]:
         """``(topic, raw, shift_ns) -> raw`` moved in time, for every topic this player publishes."""
         from atsvo_ros.io.msgtypes import typestore
-        from atsvo_ros.io.restamp import restamp_event_packet, restamp_header
 
         encoding = None
         if self.events_topic in self.publishers:

@@ -9,7 +9,7 @@ from atsvo_ros.errors import DecodeError
 from atsvo_ros.io.decode import decode_raw
 from atsvo_ros.io.encode import ENCODINGS, serialize_event_packet
 from atsvo_ros.io.msgtypes import typestore
-from atsvo_ros.io.restamp import restamp_event_packet, restamp_header
+from atsvo_ros.io.restamp import cdr_stamp_ns, restamp_event_packet, restamp_header
 
 
 def _batch(n: int = 500) -> EventBatch:
@@ -54,3 +54,11 @@ def test_header_stamp_carries_into_seconds():
     np.testing.assert_array_equal(back.data, img.data)
     with pytest.raises(DecodeError, match="negative"):
         restamp_header(raw, -200 * 10**9)
+
+
+def test_stamp_is_read_in_the_buffers_byte_order():
+    little = b"\x00\x01\x00\x00" + (7).to_bytes(4, "little") + (5).to_bytes(4, "little")
+    big = b"\x00\x00\x00\x00" + (7).to_bytes(4, "big") + (5).to_bytes(4, "big")
+    assert cdr_stamp_ns(little) == cdr_stamp_ns(big) == 7_000_000_005
+    assert cdr_stamp_ns(restamp_header(big, 10)) == 7_000_000_015
+    assert cdr_stamp_ns(little[:10]) is None
