@@ -261,16 +261,21 @@ class FusionConfig:
     surface: str = _f("ats", choices=("ats", "constant", "sits"),
                       doc="time surface of the event term: ats (the paper's adaptive one), constant (constant tau) "
                           "or sits (speed-invariant); the last two are ablations")
-    rate_threshold_deg_s: float = _f(150.0, 0.0, 10000.0,
+    rate_threshold_deg_s: float = _f(300.0, 0.0, 10000.0,
                                      doc="camera angular rate over the last two frames (or the gyro's) above which "
-                                         "the event term is used: 5 deg per frame at 30 Hz, about where RGB-D "
-                                         "tracking with the depth term stops holding. Re-measured November 2026 "
-                                         "(synthetic backflip/bound/pronk/running, 10 s): mean ATE seeds 0-2 "
-                                         "1.71 / 1.53 / 1.45 cm at 150 / 220 / 300 deg/s (bound and running peak "
-                                         "at 250-285 deg/s, the flip at 560-580), but on seeds 3-4 300 was worse "
-                                         "(bound 1.87 -> 3.16, backflip 3.87 -> 4.75 cm): not a robust gain, kept")
-    speed_threshold_m_s: float = _f(1.5, 0.0, 100.0,
-                                    doc="camera speed over the last two frames above which the event term is used")
+                                         "the event term is used: 10 deg per frame at 30 Hz. RGB-D tracking with the "
+                                         "depth term holds the simulated bound and running (peaks 250-285 deg/s) and "
+                                         "needs the events in the flip (560-580). Measured November 2026 (10 s, "
+                                         "seeds 0-4, with speed_threshold_m_s 5): bound ATE 0.99-1.38 cm at 300 "
+                                         "against 1.23-2.59 at 150; running 0.23-1.79 vs 0.51-2.21; backflip "
+                                         "equal but seed 3 (4.75 vs 3.85)")
+    speed_threshold_m_s: float = _f(5.0, 0.0, 100.0,
+                                    doc="camera speed over the last two frames above which the event term is used. "
+                                        "Translation at v blurs a surface at depth Z as a turn at v / Z rad/s does: "
+                                        "5 m/s at 1 m is rate_threshold_deg_s' 300 deg/s, above a Mini-Cheetah's "
+                                        "top speed (3.7 m/s). The former 1.5 m/s fused every sixth frame of a "
+                                        "bound (1.2 m/s median, 1.9 peak), where the frame-to-frame event term "
+                                        "only added drift (bound ATE 1.47-3.57 cm against 0.88-1.38)")
     sigma: float = _f(12.0, 0.0, 255.0, lo_open=True, doc="noise scale of an ATS residual (0-255 units)")
     huber: float = _f(15.0, 0.0, 255.0, lo_open=True, doc="Huber threshold of the ATS term")
     outlier: float = _f(40.0, 0.0, 1000.0, lo_open=True,
