@@ -163,6 +163,33 @@ def test_event_dropout_falls_back_to_rgbd_and_fuses_again(room):
     assert all(s.tracked for k, s in statuses.items() if k > 0)
 
 
+def test_keyframe_from_a_fast_turn_is_replaced_once_the_turn_slows():
+    """Keyframes taken while the camera turns fast hold blurred colour: the first trusted slow frame replaces them."""
+    room4 = BoxRoom(seed=4)
+    odo = Odometry(FUSED, CAM, EV)
+    stop = 8  # the turn (~160 deg/s, over the 100 deg/s gate here) ends at frame 8; the camera then stands still
+
+    def T_w_rgb(t_ns: int) -> np.ndarray:
+        return _T_w_rgb(min(t_ns, stop * 33 * MS))
+
+    fast_kf, after = False, []  # after: (frame, keyframe inserted) once the camera stands
+    for k in range(14):
+        t = k * 33 * MS
+        odo.add_events(simulate_events(room4, EV, lambda s: T_w_rgb(s) @ T_RGB_EVENT,
+                                       (k - 1) * 33 * MS if k else -40 * MS, t))
+        img, depth = room4.render(CAM, T_w_rgb(t), supersample=2)
+        r = odo.process_frame(RgbdFrame(t, np.clip(img + 0.5, 0, 255).astype(np.uint8), depth))
+        if 1 < k <= stop:
+            fast_kf |= r.keyframe_inserted and r.mode == "fused"
+        elif k > stop:
+            assert r.status is TrackingStatus.OK
+            after.append((k, r.keyframe_inserted))
+    assert fast_kf  # the turn needed keyframes
+    # the relative-motion factor of frame stop + 1 still comes from the turn (poses stop - 1, stop); at stop + 2
+    # it is zero, and that frame replaces the blurred keyframe, once (the map is healthy: no other keyframe)
+    assert [k for k, kf in after if kf] == [stop + 2]
+
+
 def test_event_flood_is_capped_oldest_first_and_counted():
     """A flood above fusion.max_event_rate_ev_s: the newest events of each batch go in, the rest is counted."""
     cfg = load_config("synthetic", overrides={"mode": "fused", "fusion.max_event_rate_ev_s": 1e6})
