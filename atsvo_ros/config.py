@@ -245,6 +245,22 @@ class TrackerConfig:
                                           "3.2 g (pronk); 6 g leaves room for harder landings. Hand-held: ~2 g")
     motion_noise_m: float = _f(0.02, 0.0, 10.0, doc="noise of the estimated camera centres that the "
                                "constant-velocity check allows on top of the acceleration's reach")
+    motion_prior_acceleration_m_s2: float = _f(
+        20.0, 0.0, 1e4, doc="typical camera acceleration for the motion prior: the optimiser pulls the camera centre "
+        "towards the constant-velocity prediction with sigma a dt (dt + dt0) / 2 (2.2 cm at 30 fps). The prior decides "
+        "only what images and depth leave free (mid-flip: a blank floor seen as one plane). Measured on simulated "
+        "bound / backflip, seeds 0-4: 5 / 10 / 20 / 40 m/s^2 gave bound ATE 0.8-1.8 / 1.1-1.6 / 0.9-1.1 / 0.9-1.6 cm; "
+        "at 40 one backflip doubled to 5 cm. 0 = no prior")
+    motion_prior_angular_acceleration_rad_s2: float = _f(
+        32.0, 0.0, 1e5, doc="typical angular acceleration for the motion prior's rotation sigma (same formula: "
+        "2 deg at 30 fps). In flight the body keeps its angular momentum (simulated backflips: the constant-rate "
+        "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. With a gyro the "
+        "rotation is centred on its prediction; 0 = no prior")
+    max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
+                            "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
+                            "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")
+    motion_prior_huber: float = _f(2.0, 0.0, 100.0, lo_open=True,
+                                   doc="Huber threshold of the motion prior (sigmas): beyond it the pull is constant")
     degraded_covariance_scale: float = _f(100.0, 1.0, 1e12, doc="factor on the covariance of a degraded frame")
     min_contrast: float = _f(2.0, 0.0, 255.0,
                              doc="standard deviation of the grey image (0-255) at 1/4 resolution below which the "

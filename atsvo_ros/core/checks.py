@@ -24,6 +24,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.geometry import camera_centre, relative_motion, rotation_angle_rad, se3_inv
+from atsvo_ros.core.residuals.prior import MotionPrior
 from atsvo_ros.core.tracker import TrackResult
 
 OK, DEGRADED, LOST = "ok", "degraded", "lost"
@@ -35,12 +36,14 @@ class Priors:
 
     ``gyro_T_c_w``: the pose with the gyro's rotation since the last frame. ``centre_w``: the camera
     centre (world) of the constant-velocity prediction, made only from trusted poses, and
-    ``centre_tolerance_m`` how far from it the platform's acceleration can take the camera.
+    ``centre_tolerance_m`` how far from it the platform's acceleration can take the camera. ``motion``: the
+    prior the optimiser adds to the normal equations (None without a trusted velocity).
     """
 
     gyro_T_c_w: np.ndarray | None = None
     centre_w: np.ndarray | None = None
     centre_tolerance_m: float = float("inf")
+    motion: MotionPrior | None = None
 
 
 @dataclass(frozen=True)
@@ -49,6 +52,9 @@ class Verdict:
 
     level: str
     reason: str | None = None
+    #: degraded because no image term holds: the pose rests on the depth term and the motion prior (mid-flip,
+    #: facing a blank floor). The prediction it follows stays usable for the next frames.
+    coasting: bool = False
 
     @classmethod
     def lost(cls, reason: str) -> Verdict:
@@ -74,12 +80,13 @@ def failing_image_terms(config: AtsvoConfig, res: TrackResult) -> list[str]:
 
 def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: np.ndarray,
           affine_before: tuple[float, float], affine_after: tuple[float, float], zncc: dict[str, float],
-          priors: Priors | None = None) -> Verdict:
+          priors: Priors | None = None, coast_reason: str | None = None) -> Verdict:
     """Apply the checks of the module docstring to one tracking result.
 
     ``zncc`` is the mean ZNCC of each image term's inlier patches (by block name); only the terms that pass
     their own inlier counts are judged by it: a dozen blurred colour patches mid-flip correlate with
     nothing while the ATS term holds the pose. ``priors`` are the motion's predictions (gyro, constant velocity).
+    ``coast_reason``: the image terms were left out on purpose (they misled the alignment), judge as coasting.
     """
     cfg = config.tracker
     if not res.ok:
@@ -88,13 +95,22 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
         return Verdict.lost("singular normal equations (no texture or depth structure constrains the pose)")
     # The image terms are judged apart: in fused mode a blurred colour image may fail while the ATS term
     # holds the pose; the frame is lost only when no image term constrains it.
+    priors = priors or Priors()
     image_terms = {n: b for n, b in res.blocks.items() if n in IMAGE_TERMS}
     failing = {n: image_terms[n] for n in failing_image_terms(config, res)}
-    if image_terms and len(failing) == len(image_terms):
-        return Verdict.lost("; ".join(f"{b.n_inliers} {'photometric' if n == 'rgb' else 'ATS'} inliers of "
-                                      f"{b.n_visible} visible map points" for n, b in failing.items()))
+    coasting = None
+    if coast_reason is not None or (image_terms and len(failing) == len(image_terms)):
+        weak = coast_reason or "; ".join(f"{b.n_inliers} {'photometric' if n == 'rgb' else 'ATS'} inliers of "
+                                         f"{b.n_visible} visible map points" for n, b in failing.items())
+        depth = res.blocks.get("depth")
+        if (priors.motion is None or depth is None or depth.n_inliers < cfg.min_inliers
+                or depth.inlier_fraction < cfg.min_depth_inlier_fraction):
+            return Verdict.lost(weak)
+        # No image term holds, but the depth term does and the motion prior fills what it leaves free (a plane
+        # fixes 3 DoF): coast on them, reported degraded, rather than start a new map mid-flip.
+        coasting = Verdict(DEGRADED, f"{weak}: pose from the depth term and the motion prior", coasting=True)
     std = float(np.sqrt(max(np.linalg.eigvalsh(res.covariance[:3, :3]).max(), 0.0)))
-    if std > cfg.max_position_std_m:
+    if std > cfg.max_position_std_m and coasting is None:  # coasting: the data alone is degenerate by definition
         return Verdict.lost(f"degenerate geometry (position std {std:.3f} m)")
     jump = affine_after[0] - affine_before[0]
     if abs(jump) > np.log(cfg.max_gain_ratio):
@@ -106,9 +122,10 @@ def judge(config: AtsvoConfig, res: TrackResult, T_c_w: np.ndarray, reference: n
     best = max(carrying.values(), default=float("nan"))
     if np.isfinite(best) and best < cfg.lost_zncc:
         return Verdict.lost(f"patches do not match the image (mean ZNCC {best:.2f})")
+    if coasting is not None:
+        return coasting
     if np.isfinite(best) and best < cfg.min_zncc:
         return Verdict(DEGRADED, f"patches match the image poorly (mean ZNCC {best:.2f})")
-    priors = priors or Priors()
     if priors.gyro_T_c_w is not None:
         off = np.degrees(rotation_angle_rad(T_c_w[:3, :3] @ priors.gyro_T_c_w[:3, :3].T))
         if off > cfg.max_gyro_disagreement_deg:

@@ -45,6 +45,7 @@ class KeyframeRequest:
     frames in which it was an outlier; ``tracked_uv`` are the inlier points' pixels in this frame
     (new points fill the gaps between them). ``reset`` starts a new map from this frame.
     ``rolling_shutter`` (with the frame's velocity) places points seen at other times than the stamp.
+    ``geometry_only``: add depth points only (a coasting frame: its colour image did not hold the pose).
     """
 
     snapshot_id: int
@@ -55,6 +56,7 @@ class KeyframeRequest:
     outlier_runs: np.ndarray
     reset: bool = False
     rolling_shutter: RollingShutter | None = None
+    geometry_only: bool = False
 
 
 @dataclass(frozen=True)
@@ -103,13 +105,13 @@ class Mapper:
         grey = frame.grey
         ok = valid_depth_mask(frame.depth_m, self.config.rig, mapping.depth_edge_ratio,
                               max(3, mapping.depth_window_px))
-        uv = select_rgb_pixels(grey, sel, mask=ok)
+        uv = np.zeros((0, 2), np.int64) if req.geometry_only else select_rgb_pixels(grey, sel, mask=ok)
         tracked_uv = np.asarray(req.tracked_uv, dtype=np.float64).reshape(-1, 2)
         if len(uv) and len(tracked_uv):
             uv = uv[~self._covered(uv, tracked_uv, grey.shape)]
         geo_uv = select_depth_pixels(ok, mapping.depth_points)
         added = 0
-        if len(uv) or (req.reset and len(geo_uv)):
+        if len(uv) or ((req.reset or req.geometry_only) and len(geo_uv)):
             zs = smoothed_depth(frame.depth_m, ok, mapping.depth_window_px)
             affine = (0.0, 0.0) if req.reset else req.affine
             p_c = self.camera.backproject(uv.astype(np.float64), zs[uv[:, 1], uv[:, 0]].astype(np.float64))

@@ -47,12 +47,21 @@ class MotionModel:
 
     def centre_prior(self, stamp_ns: int, max_acceleration_m_s2: float,
                      noise_m: float) -> tuple[np.ndarray, float] | None:
-        """The constant-velocity camera centre at ``stamp_ns`` and how far from it the camera can be.
+        """The constant-velocity camera centre at ``stamp_ns`` and how far from it the camera can be: the
+        acceleration bound times :meth:`prediction_spread`, plus ``noise_m`` for the estimates' own noise (None
+        when there is no spread).
+        """
+        spread = self.prediction_spread(stamp_ns)
+        if spread is None:
+            return None
+        return camera_centre(self.predict(stamp_ns)), max_acceleration_m_s2 * spread + noise_m
 
-        Positions ``p0, p1`` at ``-dt0, 0`` give the velocity at ``-dt0 / 2``; with the acceleration bounded
-        by ``a`` the centre at ``dt`` is within ``a dt (dt + dt0) / 2`` of the prediction, plus ``noise_m``
-        for the estimates' own noise. None unless the last two poses are trusted (a wrong pose would make a
-        wrong prediction) and the frame follows within :attr:`MAX_RATIO` intervals.
+    def prediction_spread(self, stamp_ns: int) -> float | None:
+        """``dt (dt + dt0) / 2`` (s^2): times an acceleration, how far the constant-velocity prediction can be off.
+
+        Poses at ``-dt0, 0`` give the velocity at ``-dt0 / 2``; an acceleration ``a`` moves the pose at ``dt`` by up
+        to ``a dt (dt + dt0) / 2`` from the prediction. None unless the last two poses are trusted (a wrong pose
+        would make a wrong prediction) and the frame follows within :attr:`MAX_RATIO` intervals.
         """
         if len(self._history) < 2 or not all(self._trusted):
             return None
@@ -60,8 +69,7 @@ class MotionModel:
         dt0_s, dt_s = (s1 - s0) * 1e-9, (int(stamp_ns) - s1) * 1e-9
         if dt0_s <= 0.0 or dt_s <= 0.0 or dt_s > self.MAX_RATIO * dt0_s:
             return None
-        reach_m = 0.5 * max_acceleration_m_s2 * dt_s * (dt_s + dt0_s)
-        return camera_centre(self.predict(stamp_ns)), reach_m + noise_m
+        return 0.5 * dt_s * (dt_s + dt0_s)
 
     @property
     def history(self) -> tuple[tuple[int, np.ndarray], ...]:

@@ -38,6 +38,7 @@ from atsvo_ros.core.mapper import EventMapRequest, KeyframeRequest, Mapper
 from atsvo_ros.core.mapping_port import InlineMapping, MappingPort
 from atsvo_ros.core.motion import MotionModel
 from atsvo_ros.core.residuals import RollingShutter
+from atsvo_ros.core.residuals.prior import MotionPrior
 from atsvo_ros.core.tracking import Tracking, TrackingOutcome, rotation_hypotheses
 from atsvo_ros.errors import ImuError
 
@@ -108,6 +109,7 @@ class Odometry:
         self._affine = (0.0, 0.0)
         # the newest keyframe was taken while the camera turned fast: its colour patches are motion-blurred
         self._blurred_keyframe = False
+        self._coast_start_ns: int | None = None  # first frame of the current run of coasting frames
         self._last_stamp: int | None = None
         self._offset_ns = int(round(config.rgb_camera.time_offset_s * 1e9))
         self._clock = FrameClock(config.rgb_camera.frame_clock_frames)
@@ -226,11 +228,30 @@ class Odometry:
                 kf = self._insert(self.tracking.keyframe_request(prepared, out, rs))
                 if kf:
                     self._blurred_keyframe = fast
-        self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED)
+        coasts = self._coasts(out, stamp)
+        if coasts:
+            # Depth is blur-free: its points keep the depth term in view for the next coasting frames, where a
+            # re-initialisation would start a new map from the same predicted pose and drop the old one.
+            kf = self._insert(self.tracking.keyframe_request(prepared, out, rs, geometry_only=True))
+            self._blurred_keyframe = kf or self._blurred_keyframe
+        self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
         if ev_frame is not None:
             self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
         self._end_frame(n_events)
         return self._result(stamp, out.T_c_w, out, status, t_track, kf, fused)
+
+    def _coasts(self, out: TrackingOutcome, stamp: int) -> bool:
+        """Whether a degraded frame held by depth and the motion prior alone keeps the motion trusted.
+
+        Its pose follows the prediction where the data is silent, so the prediction (and the prior) go on
+        into the next frame, for at most ``tracker.max_coast_s`` in a row.
+        """
+        if not out.verdict.coasting:
+            self._coast_start_ns = None
+            return False
+        if self._coast_start_ns is None:
+            self._coast_start_ns = stamp
+        return (stamp - self._coast_start_ns) * 1e-9 < self.config.tracker.max_coast_s
 
     def _end_frame(self, n_events: int) -> None:
         self._events_per_frame.append(n_events)
@@ -316,7 +337,15 @@ class Odometry:
         the constant-velocity camera centre with the reach of ``tracker.max_acceleration_m_s2``."""
         cfg = self.config.tracker
         centre = self.motion.centre_prior(stamp, cfg.max_acceleration_m_s2, cfg.motion_noise_m)
-        return Priors(gyro) if centre is None else Priors(gyro, *centre)
+        prior = None
+        a_m, a_rad = cfg.motion_prior_acceleration_m_s2, cfg.motion_prior_angular_acceleration_rad_s2
+        spread = self.motion.prediction_spread(stamp) if a_m > 0 and a_rad > 0 else None
+        if spread is not None:  # the last two poses are trusted
+            T_pred = gyro if gyro is not None else self.motion.predict(stamp)
+            prior = MotionPrior(T_pred, a_m * spread, a_rad * spread, cfg.motion_prior_huber)
+        if centre is None:
+            return Priors(gyro, motion=prior)
+        return Priors(gyro, *centre, motion=prior)
 
     def motion_rates(self) -> tuple[float, float] | None:
         """The paper's relative-motion factor: camera angular rate (rad/s) and speed (m/s) over the last two frames.

@@ -22,6 +22,7 @@ import numpy as np
 from atsvo_ros.config import TrackerConfig
 from atsvo_ros.core import _lm_kernels as lm
 from atsvo_ros.core.residuals import BlockSystem, ResidualBlock
+from atsvo_ros.core.residuals.prior import MotionPrior
 from atsvo_ros.errors import TrackingError
 
 
@@ -82,6 +83,7 @@ class _System:
     sse: float
     affine_blocks: list[ResidualBlock]
     per_block: dict[str, BlockSystem]
+    prior_H: np.ndarray | None = None  # the motion prior's part of H (left out of the covariance)
 
     @property
     def energy_per_point(self) -> float:
@@ -110,7 +112,8 @@ class Tracker:
 
     @staticmethod
     def _system(blocks: list[ResidualBlock], level: int, T: np.ndarray,
-                affine: dict[str, tuple[float, float]], relax: float) -> _System:
+                affine: dict[str, tuple[float, float]], relax: float,
+                prior: MotionPrior | None = None) -> _System:
         aff_blocks = [b for b in blocks if b.estimate_affine and level < b.n_levels and len(b)]
         dim = 6 + 2 * len(aff_blocks)
         H = np.zeros((dim, dim))
@@ -139,20 +142,28 @@ class Tracker:
         # Weak prior keeps the brightness parameters well posed when few points are visible.
         for i in range(6, dim):
             H[i, i] += 1e-3 * max(1, n_in)
-        return _System(H, g, float(energy), int(n_in), int(n_vis), int(n_res), float(sse), aff_blocks, per_block)
+        prior_H = None
+        if prior is not None:
+            ps = prior.linearise(T)
+            H[:6, :6] += ps.H
+            g[:6] += ps.g
+            energy += ps.energy
+            prior_H = ps.H
+        return _System(H, g, float(energy), int(n_in), int(n_vis), int(n_res), float(sse), aff_blocks, per_block,
+                       prior_H)
 
     def _optimise_level(self, blocks: list[ResidualBlock], level: int, T: np.ndarray,
-                        affine: dict[str, tuple[float, float]], first: _System | None = None,
+                        affine: dict[str, tuple[float, float]], prior: MotionPrior | None = None,
                         max_iterations: int | None = None) -> _LevelResult:
         """LM at one level (see the module docstring)."""
         cfg = self.config
         relax = 1.0
-        cur = first if first is not None else self._system(blocks, level, T, affine, relax)
+        cur = self._system(blocks, level, T, affine, relax, prior)
         for _ in range(2):
             if cur.n_visible == 0 or cur.n_inliers >= 0.5 * cur.n_visible:
                 break
             relax *= 2.0
-            cur = self._system(blocks, level, T, affine, relax)
+            cur = self._system(blocks, level, T, affine, relax, prior)
         eps = cfg.convergence_eps * (2.0 ** level)
         lam = 1e-4
         iters = rejected = 0
@@ -170,7 +181,7 @@ class Tracker:
             for j, blk in enumerate(cur.affine_blocks):
                 a, b = affine[blk.name]
                 aff_new[blk.name] = (a + delta[6 + 2 * j], b + delta[7 + 2 * j])
-            new = self._system(blocks, level, T_new, aff_new, relax)
+            new = self._system(blocks, level, T_new, aff_new, relax, prior)
             small = float(np.sqrt(delta[:6] @ delta[:6])) < eps
             if new.n_visible > 0 and new.energy_per_point < cur.energy_per_point:
                 gain = 1.0 - new.energy_per_point / max(cur.energy_per_point, 1e-12)
@@ -192,7 +203,8 @@ class Tracker:
         return _LevelResult(T, affine, cur, iters, converged, singular, fresh, relax)
 
     def track(self, blocks: list[ResidualBlock], guesses: list[np.ndarray],
-              affine: dict[str, tuple[float, float]] | None = None, refine_best: int = 1) -> TrackResult:
+              affine: dict[str, tuple[float, float]] | None = None, refine_best: int = 1,
+              prior: MotionPrior | None = None) -> TrackResult:
         """Estimate ``T_rgb_w`` of the current frame.
 
         Args:
@@ -201,26 +213,31 @@ class Tracker:
             affine: initial ``(a, b)`` per block name (default zeros).
             refine_best: how many of the best-scoring guesses are optimised on the coarsest level
                 before the lowest final energy per visible point wins (1 = only the best one).
+            prior: the motion prior (its energy joins every comparison; None = data alone).
         """
         if not blocks or not guesses:
             raise TrackingError("tracking needs at least one residual block and one initial guess")
         affine = {b.name: (affine or {}).get(b.name, (0.0, 0.0)) for b in blocks}
-        top = max(b.n_levels for b in blocks) - 1
+        # Start on the coarsest level where some guess sees points: blocks have their own pyramid depths
+        # (the 320x240 ATS one level fewer than 640x480 RGB), and mid-flip the ATS term may be all that sees any.
         scored: list[tuple[float, int]] = []
-        for gi, T0 in enumerate(guesses):
-            T0 = np.asarray(T0, dtype=np.float64)
-            if not np.all(np.isfinite(T0)):
-                continue
-            sysm = self._system(blocks, top, T0, affine, 1.0)
-            if sysm.n_visible > 0:
-                scored.append((sysm.energy_per_point, gi))
+        top = max(b.n_levels for b in blocks)
+        while not scored and top > 0:
+            top -= 1
+            for gi, T0 in enumerate(guesses):
+                T0 = np.asarray(T0, dtype=np.float64)
+                if not np.all(np.isfinite(T0)):
+                    continue
+                sysm = self._system(blocks, top, T0, affine, 1.0, prior)
+                if sysm.n_visible > 0:
+                    scored.append((sysm.energy_per_point, gi))
         if not scored:
             raise TrackingError("no initial guess sees any map point (or every guess contains NaN)")
         scored.sort()
         best: _LevelResult | None = None
         best_gi = scored[0][1]
         for _, gi in scored[:max(1, refine_best)]:
-            out = self._optimise_level(blocks, top, np.asarray(guesses[gi], dtype=np.float64), dict(affine))
+            out = self._optimise_level(blocks, top, np.asarray(guesses[gi], dtype=np.float64), dict(affine), prior)
             if best is None or out.system.energy_per_point < best.system.energy_per_point:
                 best, best_gi = out, gi
         assert best is not None
@@ -228,15 +245,17 @@ class Tracker:
         total_iters = out.iterations
         singular = out.singular
         for level in range(top - 1, -1, -1):
-            out = self._optimise_level(blocks, level, out.T, out.affine)
+            out = self._optimise_level(blocks, level, out.T, out.affine, prior)
             total_iters += out.iterations
             singular |= out.singular
         # Point states, H and the statistics must belong to the final estimate at the nominal threshold
         # (a rejected step, another guess or the relaxed threshold may have overwritten them).
         final = out.system
         if not out.fresh or top == 0 or out.relax != 1.0:
-            final = self._system(blocks, 0, out.T, out.affine, 1.0)
-        cov = self._covariance(final.H, final.n_residuals, final.sse) * self.config.covariance_scale
+            final = self._system(blocks, 0, out.T, out.affine, 1.0, prior)
+        # The covariance says what the data supports: the prior's information is left out of it.
+        H_data = final.H if final.prior_H is None else final.H - np.pad(final.prior_H, (0, len(final.H) - 6))
+        cov = self._covariance(H_data, final.n_residuals, final.sse) * self.config.covariance_scale
         states = {b.name: b.state.copy() for b in blocks}
         stats = {b.name: BlockStats(len(b), bs.n_visible, bs.n_inliers, bs.energy, bs.sse, bs.n_residuals)
                  for b in blocks if (bs := final.per_block.get(b.name)) is not None}

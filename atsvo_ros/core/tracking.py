@@ -157,7 +157,8 @@ class Tracking:
             return self._failed(guesses[0], affine, "no map point to track")
         hyp = rotation_hypotheses(guesses[0], cfg.rotation_hypotheses_deg)
         try:
-            res = self.tracker.track(blocks, [*guesses, *hyp], {"rgb": affine}, refine_best=cfg.refine_guesses)
+            res = self.tracker.track(blocks, [*guesses, *hyp], {"rgb": affine}, refine_best=cfg.refine_guesses,
+                                     prior=priors.motion if priors else None)
             T_c_w, new_affine, znccs, verdict = self._assess(res, blocks, frame, affine, reference, priors)
             weak = failing_image_terms(self.config, res)
             if not verdict.ok and weak and any(n in IMAGE_TERMS and n not in weak for n in res.blocks):
@@ -165,12 +166,17 @@ class Tracking:
                 # the ATS term's pose 9 deg away. Align again from the same guesses without it. (Only then:
                 # on good frames those few patches help the ATS term, backflip ATE 2-4 cm against 10-18.)
                 alone = [b for b in blocks if b.name not in weak]
-                res2 = self.tracker.track(alone, [*guesses, *hyp], {"rgb": affine}, refine_best=cfg.refine_guesses)
+                res2 = self.tracker.track(alone, [*guesses, *hyp], {"rgb": affine}, refine_best=cfg.refine_guesses,
+                                     prior=priors.motion if priors else None)
                 second = self._assess(res2, alone, frame, affine, reference, priors)
                 if second[3].ok:
                     res, blocks, (T_c_w, new_affine, znccs, verdict) = res2, alone, second
         except TrackingError as exc:
             return self._failed(guesses[0], affine, str(exc))
+        if not verdict.ok and not verdict.coasting:
+            coast = self._coast(blocks, frame, affine, reference, priors, verdict)
+            if coast is not None:
+                res, blocks, (T_c_w, new_affine, znccs, verdict) = coast
         zncc = max(znccs.values(), default=float("nan"), key=lambda z: -np.inf if np.isnan(z) else z)
         states = res.states.get("rgb", np.zeros(0, np.int8))
         inl = states == INLIER
@@ -182,22 +188,41 @@ class Tracking:
                                self.config.mapping, self.snapshot.healthy_reference)
         return TrackingOutcome(res, verdict, T_c_w, new_affine, zncc, health, uv)
 
+    def _coast(self, blocks: list[ResidualBlock], frame: PreparedFrame, affine: tuple[float, float],
+               reference: np.ndarray, priors: Priors | None, verdict: Verdict):
+        """The image terms misled the alignment (mid-flip: a few blurred patches, 1.2 deg off): align on the depth
+        term and the motion prior alone from the prediction. ``(result, blocks, assessment)`` when that coasts,
+        else None (no prior, no depth term, or the depth term does not hold either)."""
+        depth = [b for b in blocks if b.name == "depth"]
+        if not depth or priors is None or priors.motion is None:
+            return None
+        try:
+            res = self.tracker.track(depth, [priors.motion.T_pred_rgb_w], {}, prior=priors.motion)
+        except TrackingError:  # no map point in view: nothing to coast on
+            return None
+        why = f"the image terms did not hold ({verdict.reason})"
+        out = self._assess(res, depth, frame, affine, reference, priors, why)
+        return (res, depth, out) if out[3].coasting else None
+
     def _assess(self, res: TrackResult, blocks: list[ResidualBlock], frame: PreparedFrame,
                 affine: tuple[float, float], reference: np.ndarray,
-                priors: Priors | None) -> tuple[np.ndarray, tuple[float, float], dict[str, float], Verdict]:
-        """The estimate of ``res`` as a rotation-projected pose, its brightness, per-term ZNCC and verdict."""
+                priors: Priors | None, coast_reason: str | None = None
+                ) -> tuple[np.ndarray, tuple[float, float], dict[str, float], Verdict]:
+        """The estimate of ``res`` as a rotation-projected pose, its brightness, per-term ZNCC and verdict
+        (``coast_reason``: the image terms were left out, see :func:`~atsvo_ros.core.checks.judge`)."""
         T_c_w = res.T_rgb_w.copy()
         T_c_w[:3, :3] = project_to_so3(T_c_w[:3, :3])
         inl = res.states.get("rgb", np.zeros(0, np.int8)) == INLIER
         new_affine = self._new_affine(res, frame, T_c_w, inl, affine)
         znccs = {b.name: _mean_zncc(b) for b in blocks if isinstance(b, PhotometricBlock)}
-        return T_c_w, new_affine, znccs, judge(self.config, res, T_c_w, reference, affine, new_affine, znccs, priors)
+        return T_c_w, new_affine, znccs, judge(self.config, res, T_c_w, reference, affine, new_affine, znccs, priors,
+                                                   coast_reason)
 
     def keyframe_request(self, frame: PreparedFrame, outcome: TrackingOutcome,
-                         rolling_shutter: RollingShutter | None = None) -> KeyframeRequest:
-        """A request to insert ``frame`` as a keyframe at the tracked pose."""
+                         rolling_shutter: RollingShutter | None = None, geometry_only: bool = False) -> KeyframeRequest:
+        """A request to insert ``frame`` as a keyframe at the tracked pose (``geometry_only``: depth points only)."""
         return KeyframeRequest(self.snapshot.snapshot_id, frame, outcome.T_c_w, outcome.affine, outcome.tracked_uv,
-                               self._outlier_runs.copy(), rolling_shutter=rolling_shutter)
+                               self._outlier_runs.copy(), rolling_shutter=rolling_shutter, geometry_only=geometry_only)
 
     @staticmethod
     def reset_request(frame: PreparedFrame, T_c_w: np.ndarray,

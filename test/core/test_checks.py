@@ -9,6 +9,7 @@ import pytest
 from atsvo_ros.config import load_config
 from atsvo_ros.core.checks import DEGRADED, LOST, OK, Priors, judge
 from atsvo_ros.core.geometry import se3_exp
+from atsvo_ros.core.residuals.prior import MotionPrior
 from atsvo_ros.core.tracker import BlockStats, TrackResult
 
 CFG = load_config("synthetic")
@@ -73,3 +74,30 @@ def test_zncc_of_a_term_too_small_to_count_does_not_lose_the_frame():
     carrying = {**blocks, "rgb": BlockStats(1000, 1000, 900, 1, 1, 1)}
     v = _judge(res=_result(blocks=carrying), zncc={"rgb": 0.05, "ats": float("nan")})
     assert v.level == LOST and "ZNCC 0.05" in v.reason
+
+
+def _coast_judge(prior: bool, depth: BlockStats, **kw):
+    res = _result(blocks={"rgb": BlockStats(1000, 12, 5, 1, 1, 1), "depth": depth},
+                  covariance=np.eye(6) * 0.01)  # the data alone: degenerate (a plane)
+    motion = MotionPrior(I4, 0.02, 0.03) if prior else None
+    return judge(CFG, res, I4, I4, (0.0, 0.0), (0.0, 0.0), {"rgb": 0.1}, Priors(motion=motion), **kw)
+
+
+def test_without_image_terms_a_frame_coasts_on_depth_and_the_motion_prior():
+    v = _coast_judge(True, BlockStats(800, 700, 690, 1, 1, 1))
+    assert v.level == DEGRADED and v.coasting and "motion prior" in v.reason and "photometric inliers" in v.reason
+
+
+@pytest.mark.parametrize("prior, depth", [
+    (False, BlockStats(800, 700, 690, 1, 1, 1)),  # no trusted motion to coast on
+    (True, BlockStats(800, 700, 200, 1, 1, 1)),  # the depth term does not hold either
+    (True, BlockStats(800, 20, 20, 1, 1, 1)),  # too few depth points
+])
+def test_coasting_needs_the_prior_and_a_depth_term_that_holds(prior, depth):
+    v = _coast_judge(prior, depth)
+    assert v.level == LOST and not v.coasting and "photometric inliers" in v.reason
+
+
+def test_image_terms_left_out_on_purpose_are_judged_as_coasting():
+    v = _coast_judge(True, BlockStats(800, 700, 690, 1, 1, 1), coast_reason="the image terms did not hold (x)")
+    assert v.coasting and v.reason.startswith("the image terms did not hold")

@@ -58,3 +58,18 @@ def test_no_new_points_still_renews_the_reference_health():
     s1 = mapper.insert(KeyframeRequest(s0.snapshot_id, f0, np.eye(4), (0.0, 0.0), tracked, np.zeros(len(s0), np.int32)))
     assert len(s1) == len(s0) and mapper.n_keyframes == 1
     assert s1.snapshot_id == s0.snapshot_id + 1 and s1.n_reference == len(tracked)
+
+
+def test_a_geometry_only_keyframe_adds_depth_points_and_no_patches():
+    cfg = load_config("synthetic")
+    room = BoxRoom(seed=1)
+    fe, f0 = _prepared(room, np.eye(4), 0)
+    mapper = Mapper(cfg, fe.cameras)
+    s0 = mapper.insert(KeyframeRequest(-1, f0, np.eye(4), (0.0, 0.0), np.zeros((0, 2)), np.zeros(0, np.int32),
+                                       reset=True))
+    T_w_c1 = se3_exp(np.array([0.05, 0, 0, 0, 0.2, 0]))  # turned 11 deg: new depth in view
+    _, f1 = _prepared(room, T_w_c1, 33_000_000)
+    s1 = mapper.insert(KeyframeRequest(s0.snapshot_id, f1, np.linalg.inv(T_w_c1), (0.0, 0.0), np.zeros((0, 2)),
+                                       np.zeros(len(s0), np.int32), geometry_only=True))
+    assert len(s1) == len(s0) and len(s1.keyframes) == 2  # no photometric point from a frame that did not hold
+    assert len(s1.geo_points_w) - len(s0.geo_points_w) > 0.5 * cfg.mapping.depth_points
