@@ -21,6 +21,16 @@ def _prepared(room, T_w_c, stamp):
     return fe, fe.prepare(RgbdFrame(stamp, img, depth))
 
 
+def _first_keyframe(cfg):
+    """A mapper with a new map from a frame at the origin of a box room: ``(room, frame, mapper, snapshot)``."""
+    room = BoxRoom(seed=1)
+    fe, f0 = _prepared(room, np.eye(4), 0)
+    mapper = Mapper(cfg, fe.cameras)
+    s0 = mapper.insert(KeyframeRequest(-1, f0, np.eye(4), (0.0, 0.0), np.zeros((0, 2)), np.zeros(0, np.int32),
+                                       reset=True))
+    return room, f0, mapper, s0
+
+
 def test_requests_become_snapshots_and_outliers_are_culled():
     cfg = load_config("synthetic", overrides={"mapping.max_outlier_frames": 3, "mapping.max_keyframes": 2})
     room = BoxRoom(seed=1)
@@ -46,11 +56,7 @@ def test_requests_become_snapshots_and_outliers_are_culled():
 
 def test_no_new_points_still_renews_the_reference_health():
     cfg = load_config("synthetic")
-    room = BoxRoom(seed=1)
-    fe, f0 = _prepared(room, np.eye(4), 0)
-    mapper = Mapper(cfg, fe.cameras)
-    s0 = mapper.insert(KeyframeRequest(-1, f0, np.eye(4), (0.0, 0.0), np.zeros((0, 2)), np.zeros(0, np.int32),
-                                       reset=True))
+    room, f0, mapper, s0 = _first_keyframe(cfg)
     # Every candidate cell already covered by a tracked point: nothing to add, yet a fresh reference.
     h, w = f0.grey.shape
     ys, xs = np.mgrid[0:h:2, 0:w:2]
@@ -62,11 +68,7 @@ def test_no_new_points_still_renews_the_reference_health():
 
 def test_a_geometry_only_keyframe_adds_depth_points_and_no_patches():
     cfg = load_config("synthetic")
-    room = BoxRoom(seed=1)
-    fe, f0 = _prepared(room, np.eye(4), 0)
-    mapper = Mapper(cfg, fe.cameras)
-    s0 = mapper.insert(KeyframeRequest(-1, f0, np.eye(4), (0.0, 0.0), np.zeros((0, 2)), np.zeros(0, np.int32),
-                                       reset=True))
+    room, f0, mapper, s0 = _first_keyframe(cfg)
     T_w_c1 = se3_exp(np.array([0.05, 0, 0, 0, 0.2, 0]))  # turned 11 deg: new depth in view
     _, f1 = _prepared(room, T_w_c1, 33_000_000)
     s1 = mapper.insert(KeyframeRequest(s0.snapshot_id, f1, np.linalg.inv(T_w_c1), (0.0, 0.0), np.zeros((0, 2)),
