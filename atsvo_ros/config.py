@@ -254,8 +254,9 @@ class TrackerConfig:
     motion_prior_angular_acceleration_rad_s2: float = _f(
         32.0, 0.0, 1e5, doc="typical angular acceleration for the motion prior's rotation sigma (same formula: "
         "2 deg at 30 fps). In flight the body keeps its angular momentum (simulated backflips: the constant-rate "
-        "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. With a gyro the "
-        "rotation is centred on its prediction; 0 = no prior")
+        "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. Centred on the "
+        "constant-velocity prediction even with a gyro, so a node's poses do not depend on when its IMU arrives; "
+        "0 = no prior")
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")
