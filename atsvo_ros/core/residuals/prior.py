@@ -5,9 +5,10 @@ faces a blank, blurred floor, the depth image is one plane (it fixes the distanc
 the slide along the floor or the turn about its normal) and a few dozen ATS patches are all that
 is left. Without a prior the optimum drifts along those directions (backflip seed 4: 6.4 deg off
 in the roll no turn had, lost the next frame). In flight a body keeps its angular momentum, so the
-constant-velocity prediction is good to a fraction of a degree. The prior's information (1/sigma^2) is tiny next to what textured images or a
-non-planar depth image contribute, so it decides only the directions the data leaves free; a
-Huber kernel caps its pull where the prediction is wrong (a landing's impact).
+constant-velocity prediction is good to a fraction of a degree. The prior's information
+(1/sigma^2) is tiny next to what textured images or a non-planar depth image contribute, so it
+decides only the directions the data leaves free; a Huber kernel caps its pull where the
+prediction is wrong (a landing's impact).
 """
 from __future__ import annotations
 
