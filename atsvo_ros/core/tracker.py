@@ -153,8 +153,7 @@ class Tracker:
                        prior_H)
 
     def _optimise_level(self, blocks: list[ResidualBlock], level: int, T: np.ndarray,
-                        affine: dict[str, tuple[float, float]], prior: MotionPrior | None = None,
-                        max_iterations: int | None = None) -> _LevelResult:
+                        affine: dict[str, tuple[float, float]], prior: MotionPrior | None = None) -> _LevelResult:
         """LM at one level (see the module docstring)."""
         cfg = self.config
         relax = 1.0
@@ -169,7 +168,7 @@ class Tracker:
         iters = rejected = 0
         converged = singular = False
         fresh = True
-        for _ in range(max_iterations or cfg.max_iterations):
+        for _ in range(cfg.max_iterations):
             iters += 1
             if cur.n_inliers < 6:
                 break

@@ -156,9 +156,10 @@ class Tracking:
         if not blocks:
             return self._failed(guesses[0], affine, "no map point to track")
         hyp = rotation_hypotheses(guesses[0], cfg.rotation_hypotheses_deg)
+        prior = priors.motion if priors else None
         try:
             res = self.tracker.track(blocks, [*guesses, *hyp], {"rgb": affine}, refine_best=cfg.refine_guesses,
-                                     prior=priors.motion if priors else None)
+                                     prior=prior)
             T_c_w, new_affine, znccs, verdict = self._assess(res, blocks, frame, affine, reference, priors)
             weak = failing_image_terms(self.config, res)
             if not verdict.ok and weak and any(n in IMAGE_TERMS and n not in weak for n in res.blocks):
@@ -167,7 +168,7 @@ class Tracking:
                 # on good frames those few patches help the ATS term, backflip ATE 2-4 cm against 10-18.)
                 alone = [b for b in blocks if b.name not in weak]
                 res2 = self.tracker.track(alone, [*guesses, *hyp], {"rgb": affine}, refine_best=cfg.refine_guesses,
-                                     prior=priors.motion if priors else None)
+                                          prior=prior)
                 second = self._assess(res2, alone, frame, affine, reference, priors)
                 if second[3].ok:
                     res, blocks, (T_c_w, new_affine, znccs, verdict) = res2, alone, second
@@ -189,7 +190,8 @@ class Tracking:
         return TrackingOutcome(res, verdict, T_c_w, new_affine, zncc, health, uv)
 
     def _coast(self, blocks: list[ResidualBlock], frame: PreparedFrame, affine: tuple[float, float],
-               reference: np.ndarray, priors: Priors | None, verdict: Verdict):
+               reference: np.ndarray, priors: Priors | None, verdict: Verdict
+               ) -> tuple[TrackResult, list[ResidualBlock], tuple] | None:
         """The image terms misled the alignment (mid-flip: a few blurred patches, 1.2 deg off): align on the depth
         term and the motion prior alone from the prediction. ``(result, blocks, assessment)`` when that coasts,
         else None (no prior, no depth term, or the depth term does not hold either)."""
