@@ -44,7 +44,8 @@ class CameraConfig:
     use_camera_info: bool = _f(True, doc="prefer the camera_info topic over these values")
     readout_time_s: float = _f(0.0, 0.0, 1.0, doc="rolling-shutter readout time, first to last row (0 = global "
                                "shutter, e.g. the D455's colour and depth imagers)")
-    time_offset_s: float = _f(0.0, -1.0, 1.0, doc="exposure time of the middle row minus the image stamp")
+    time_offset_s: float = _f(0.0, -1.0, 1.0, doc="exposure time of the middle row minus the image stamp (a "
+                              "host-stamping driver's latency, negative); the odometry is stamped at that time")
     frame_clock_frames: int = _f(30, 0, 10000, doc="frames of the line fitted to the image stamps to recover the "
                                  "camera's frame clock from host-stamp jitter (0 = use the stamps as they are)")
 

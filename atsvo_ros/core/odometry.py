@@ -113,7 +113,7 @@ class Odometry:
         self._last_stamp: int | None = None
         self._offset_ns = int(round(config.rgb_camera.time_offset_s * 1e9))
         self._clock = FrameClock(config.rgb_camera.frame_clock_frames)
-        self._shift_ns = 0  # exposure time minus stamp of the frame being processed
+        self._shift_ns = 0  # frame-clock time minus stamp of the frame being processed (its stamp jitter)
         #: Why the last frame was not ``ok`` (None when it was): for logs and diagnostics.
         self.last_loss_reason: str | None = None
 
@@ -158,9 +158,11 @@ class Odometry:
         self._event_time_s = 0.0
         n_events = self._events_since_frame
         # Internally a frame lives at the time its image was exposed (middle row: the frame clock's time of
-        # the stamp plus the configured offset); the pose is published at the stamp (see _result).
+        # the stamp plus the configured offset). The pose is published at the stamp plus the offset, the
+        # exposure time on the stamps' clock: only the stamp's jitter off the frame clock is extrapolated
+        # over (see _result), as moving it by the offset too would add the velocity's noise for nothing.
         stamp = self._clock(frame.stamp_ns) + self._offset_ns
-        self._shift_ns = stamp - int(frame.stamp_ns)
+        self._shift_ns = stamp - int(frame.stamp_ns) - self._offset_ns
         prepared = self.frontend.prepare(frame)
         newer = self.mapping.latest()  # a keyframe mapping finished meanwhile (threaded or remote mapping)
         if newer is not None:
@@ -471,7 +473,7 @@ class Odometry:
     # ------------------------------------------------------------------ output
     def _result(self, stamp: int, T_c_w: np.ndarray, out: TrackingOutcome | None, status: TrackingStatus,
                 t_track: float, kf: bool, fused: bool = False) -> OdometryResult:
-        """The published result: the pose moved from the exposure time to the frame's stamp, in odom/base."""
+        """The published result, in odom/base, at the stamp plus ``time_offset_s`` (pose moved off the frame clock)."""
         if self._shift_ns:
             T_c_w = se3_exp(-self._shift_ns * 1e-9 * self.motion.twist_per_s()) @ T_c_w
             stamp -= self._shift_ns

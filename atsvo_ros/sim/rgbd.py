@@ -36,6 +36,8 @@ class RgbModel:
         stamp_jitter_s: scale of the delay between exposure and the reported stamp (half-normal): a driver
             without hardware timestamps stamps each image when it reaches the host (OpenNI's Kinect in
             TUM RGB-D: 1.8 ms rms off its frame clock); the D455 with global time stamps on the sensor (0).
+        stamp_latency_s: constant delay of every stamp after the middle row's exposure, on top of the jitter
+            (OpenNI's Kinect: ~10 ms against TUM's motion capture; the D455 with global time: 0).
     """
 
     max_blur_step_px: float = 1.0
@@ -50,6 +52,7 @@ class RgbModel:
     vignetting: float = 0.35
     readout_time_s: float = 0.0
     stamp_jitter_s: float = 0.0
+    stamp_latency_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.max_blur_step_px <= 0 or self.max_subframes < 1:
@@ -58,6 +61,8 @@ class RgbModel:
             raise SimulationError(f"readout_time_s must be in [0, 0.1] s, got {self.readout_time_s}")
         if not 0.0 <= self.stamp_jitter_s <= 0.005:
             raise SimulationError(f"stamp_jitter_s must be in [0, 0.005] s, got {self.stamp_jitter_s}")
+        if not 0.0 <= self.stamp_latency_s <= 0.1:
+            raise SimulationError(f"stamp_latency_s must be in [0, 0.1] s, got {self.stamp_latency_s}")
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ stream to a bag. Streams, merged by stamp:
 
 * ground truth ``GroundTruth(stamp_ns, T_world_base)`` at ``gt_rate_hz``;
 * RGB-D ``RgbdFrame(stamp_ns, rgb, depth_mm)``: the stamp is the middle of the exposure (plus the
-  host-stamping delay ``RgbModel.stamp_jitter_s``, 0 by default); the
+  host-stamping delay ``RgbModel.stamp_latency_s`` + ``stamp_jitter_s``, 0 by default); the
   colour image averages sub-frames spread over the exposure (no more than ``max_blur_step_px``
   apparent motion between two), the depth is rendered at the stamp;
 * events as :class:`EventBatch` packets of ``event_packet_s``, yielded when the packet is complete
@@ -240,14 +240,17 @@ class Simulation:
             for i in range(len(chunk)):
                 yield chunk.select(slice(i, i + 1))
 
-    def stamp_delays_ns(self, n: int, jitter_s: float | None = None) -> np.ndarray:
-        """Delay of each of the first ``n`` frames' stamps after its exposure (scale ``jitter_s``, by default
-        ``RgbModel.stamp_jitter_s``; the same draws for the same seed whatever the scale)."""
+    def stamp_delays_ns(self, n: int, jitter_s: float | None = None, latency_s: float | None = None) -> np.ndarray:
+        """Delay of each of the first ``n`` frames' stamps after its exposure: ``latency_s`` plus a half-normal
+        jitter of scale ``jitter_s`` (by default ``RgbModel.stamp_latency_s`` / ``stamp_jitter_s``; the same
+        draws for the same seed whatever the scale)."""
         jitter_s = self.spec.rgb_model.stamp_jitter_s if jitter_s is None else float(jitter_s)
-        if jitter_s <= 0:
-            return np.zeros(n, np.int64)
-        rng = np.random.default_rng(self._stamp_seed)
-        return np.round(np.abs(rng.standard_normal(n)) * (jitter_s * 1e9)).astype(np.int64)
+        latency_s = self.spec.rgb_model.stamp_latency_s if latency_s is None else float(latency_s)
+        delays = np.full(n, int(round(latency_s * 1e9)), np.int64)
+        if jitter_s > 0:
+            rng = np.random.default_rng(self._stamp_seed)
+            delays += np.round(np.abs(rng.standard_normal(n)) * (jitter_s * 1e9)).astype(np.int64)
+        return delays
 
     def frames(self, stats: dict | None = None) -> Iterator[RgbdFrame]:
         """RGB-D frames at ``rate_hz`` (``stats['rgb_renders']`` counts the rendered sub-frames)."""

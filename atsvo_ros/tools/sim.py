@@ -24,9 +24,10 @@ def _main(args: argparse.Namespace) -> int:
                         exposure_s=args.exposure, gt_rate_hz=args.gt_rate, event_packet_s=args.packet_ms * 1e-3,
                         event_scale=args.event_scale, texture_size=args.texture_size, imu=not args.no_imu)
     spec = dataclasses.replace(spec, event_model=_event_model(spec.event_model, args))
-    if args.rgb_readout or args.rgb_stamp_jitter:
+    if args.rgb_readout or args.rgb_stamp_jitter or args.rgb_stamp_latency:
         spec = dataclasses.replace(spec, rgb_model=dataclasses.replace(
-            spec.rgb_model, readout_time_s=args.rgb_readout, stamp_jitter_s=args.rgb_stamp_jitter))
+            spec.rgb_model, readout_time_s=args.rgb_readout, stamp_jitter_s=args.rgb_stamp_jitter,
+            stamp_latency_s=args.rgb_stamp_latency))
     summary = write_sequence(spec, args.out, fmt=args.format, event_msg=args.event_msg, encoding=args.encoding,
                              force=args.force, progress=not args.quiet)
     print(f"{args.scenario} {args.duration:g} s seed {args.seed}: {summary['frames']} RGB-D frames, "
@@ -75,6 +76,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--rgb-stamp-jitter", type=float, default=0.0,
                    help="scale in s of the delay between a colour/depth image's exposure and its stamp (default 0: "
                         "hardware stamps as the D455's; ~0.002 for a host-stamped Kinect v1)")
+    p.add_argument("--rgb-stamp-latency", type=float, default=0.0,
+                   help="constant delay in s of every colour/depth stamp after the exposure, on top of the jitter "
+                        "(default 0; ~0.010 for TUM's Kinect v1 against its motion capture)")
     p.add_argument("--gt-rate", type=float, default=200.0, help="ground-truth pose rate in Hz (default 200)")
     p.add_argument("--event-msg", default="packet", choices=EVENT_MSGS,
                    help="layout robot: event_camera_msgs/EventPacket (packet) or dvs_msgs/EventArray (dvs)")

@@ -324,3 +324,34 @@ def test_host_stamped_frames_are_tracked_on_the_frame_clock(room):
             errs.append(_err(est, true)[1])
         rel[name] = float(np.sqrt(np.mean(np.square(errs))))
     assert rel["off"] > 0.08 and rel["on"] < 0.5 * rel["off"], rel
+
+
+def test_stamp_latency_is_removed_and_the_pose_published_at_the_exposure_time(room):
+    """A driver that stamps frames 10 ms after their exposure (plus jitter), the camera swinging +-20 deg at
+    1 Hz (up to 125 deg/s): with ``time_offset_s`` = -10 ms each pose is stamped at its exposure and matches
+    the motion there; without it every relative pose is the motion of 10 ms later (0.19 vs 0.05 deg per
+    frame measured)."""
+    period_ns, n, latency_ns = 33_333_333, 36, 10 * MS
+    t_ns = np.arange(n, dtype=np.int64) * period_ns
+    stamps = t_ns + latency_ns + np.round(np.abs(np.random.default_rng(5).standard_normal(n)) * 1e6).astype(np.int64)
+
+    def T_w_c(t_ns):
+        t_s = np.asarray(t_ns) * 1e-9
+        return se3_exp(np.r_[0.05 * t_s, 0.0, 0.0, 0.0, np.radians(20.0) * np.sin(2 * np.pi * t_s), 0.0])
+
+    frames = [_frame(room, CAM, T_w_c(t), int(s), ss=1) for t, s in zip(t_ns, stamps)]
+    rel = {}
+    for name, offset_s in (("on", -0.010), ("off", 0.0)):
+        cfg = load_config("synthetic", overrides={"rig.T_base_rgb": np.eye(4).reshape(-1).tolist(),
+                                                  "rgb_camera.time_offset_s": offset_s})
+        odo = Odometry(cfg, CAM)
+        res = [odo.process_frame(f) for f in frames]
+        assert [r.stamp_ns for r in res] == (stamps + int(round(offset_s * 1e9))).tolist()
+        assert all(r.status is TrackingStatus.OK for r in res[1:]), [r.status for r in res]
+        errs = []
+        for k in range(12, n):  # once the frame clock's fit is in use
+            est = se3_inv(res[k - 1].T_odom_camera) @ res[k].T_odom_camera
+            true = se3_inv(T_w_c(res[k - 1].stamp_ns)) @ T_w_c(res[k].stamp_ns)
+            errs.append(_err(est, true)[1])
+        rel[name] = float(np.sqrt(np.mean(np.square(errs))))
+    assert rel["off"] > 0.1 and rel["on"] < 0.4 * rel["off"], rel

@@ -192,6 +192,7 @@ def test_missing_and_broken_files_are_reported(tmp_path, synth):
 
 
 def test_replay_reads_a_tum_folder_with_its_preset_and_camera_frame(synth, tmp_path):
+    from atsvo_ros.config import load_config
     from atsvo_ros.eval.metrics import EvalOptions
     from atsvo_ros.io.trajectory import read_tum
     from atsvo_ros.tools.replay import replay
@@ -201,17 +202,18 @@ def test_replay_reads_a_tum_folder_with_its_preset_and_camera_frame(synth, tmp_p
     res = replay(folder, tmp_path / "out", plots=False, progress=False, eval_options=EvalOptions(align="none"))
     assert "config preset tum_fr1 (from the folder name)" in res.notes
     assert any("8 colour/depth pairs" in n for n in res.notes)
-    assert res.mode == "rgbd" and res.stamps_ns.tolist() == [f[0] for f in frames]
+    # published at the exposure: the stamp minus the preset's 10 ms host-stamping latency
+    offset_ns = int(round(load_config("tum_fr1").rgb_camera.time_offset_s * 1e9))
+    assert offset_ns == -10_000_000
+    assert res.mode == "rgbd" and res.stamps_ns.tolist() == [f[0] + offset_ns for f in frames]
     assert "frame=colour optical" in (tmp_path / "out" / "trajectory.tum").read_text().splitlines()[0]
     assert len(read_tum(tmp_path / "out" / "groundtruth.tum")) == 8
     # distortion, depth scale and the camera-frame ground truth all right: the motion is recovered
     # (measured 0.6 cm; 1.5 cm without undistortion, 1.4 cm with the fr2 intrinsics, 10 cm with a
     # 1/1000 depth scale: walls 3-4 m away leave rotation and translation hard to tell apart). These
-    # frames are rendered with a global shutter, so the preset's Kinect rolling-shutter readout is
-    # turned off (left on, the model misplaces the rows: ~3 cm).
-    from atsvo_ros.config import load_config
-
-    cfg = load_config("tum_fr1", overrides={"rgb_camera.readout_time_s": 0.0})
+    # frames are rendered with a global shutter and stamped at their exposure, so the preset's Kinect
+    # rolling-shutter readout (left on, the model misplaces the rows: ~3 cm) and latency are turned off.
+    cfg = load_config("tum_fr1", overrides={"rgb_camera.readout_time_s": 0.0, "rgb_camera.time_offset_s": 0.0})
     res = replay(folder, tmp_path / "out_gs", cfg, plots=False, progress=False, eval_options=EvalOptions(align="none"))
     assert res.statuses.count("ok") >= 6
     assert res.metrics["ate_rmse_m"] < 0.015, res.metrics

@@ -253,9 +253,10 @@ def test_event_renders_never_let_the_scene_move_more_than_half_a_pixel():
     assert np.percentile(gaps, 95) > 10 * np.percentile(gaps, 5)
 
 
-def test_host_stamp_jitter_delays_the_stamps_not_the_images():
-    """``RgbModel.stamp_jitter_s``: the images stay on the frame clock, the stamps come later by half-normal
-    delays (the draws the tracking benchmark applies to cached frames with ``--stamp-jitter``)."""
+def test_host_stamp_jitter_and_latency_delay_the_stamps_not_the_images():
+    """``RgbModel.stamp_jitter_s`` / ``stamp_latency_s``: the images stay on the frame clock, the stamps come
+    later by half-normal delays plus the latency (the draws the tracking benchmark applies to cached frames
+    with ``--stamp-jitter`` / ``--stamp-latency``)."""
     from atsvo_ros.sim.sequence import make_simulation
 
     spec = SequenceSpec(scenario="trot", duration_s=0.5, seed=2, **TINY)
@@ -269,3 +270,8 @@ def test_host_stamp_jitter_delays_the_stamps_not_the_images():
         np.testing.assert_array_equal(a.depth_mm, b.depth_mm)
     with pytest.raises(SimulationError):
         dataclasses.replace(spec.rgb_model, stamp_jitter_s=0.02)
+    latent = dataclasses.replace(jittered, rgb_model=dataclasses.replace(jittered.rgb_model, stamp_latency_s=0.01))
+    np.testing.assert_array_equal(make_simulation(latent).stamp_delays_ns(16), delays + 10_000_000)
+    np.testing.assert_array_equal(make_simulation(spec).stamp_delays_ns(4, 0.0, 0.01), np.full(4, 10_000_000))
+    with pytest.raises(SimulationError):
+        dataclasses.replace(spec.rgb_model, stamp_latency_s=-0.01)

@@ -39,6 +39,7 @@ def test_score_counts_only_ok_frames_with_large_rotation_errors():
     # second one ends at frame 6, which is not ok
     assert s["ok_abs_rot_gt_1_5"] == 1 and s["ok_rel_rot_gt_1_5"] == 1
     assert s["rpe_deg_per_frame"] == pytest.approx(np.sqrt(2 * 9.0 / (n - 1)), rel=1e-6)  # RMSE
+    assert s["rpe_deg_per_frame_interp"] == pytest.approx(s["rpe_deg_per_frame"], rel=1e-6)  # GT at the stamps
     assert s["rpe_deg_per_frame_mean"] == pytest.approx(6.0 / (n - 1), rel=1e-6)
     s = score(Trajectory(stamps, gt), stamps, est, np.zeros(n, bool))
     assert s["ok_abs_rot_gt_1_5"] == s["ok_rel_rot_gt_1_5"] == 0
@@ -64,6 +65,6 @@ def test_bench_real_runs_ours_and_variants_and_writes_the_table(tmp_path):
         assert r["frames"] == 5 and r["n_matched"] == 5 and r["ms_median"] > 0 and r["ok"] >= 3
         assert r["ate_cm"] < 2.0  # tiny, exact-pose sequence: the row is the real thing, not a placeholder
     md = (tmp_path / "o" / "results.md").read_text()
-    assert "| method | ATE cm | RPE deg/f | RPE cm/f | track ms med |" in md
+    assert "| method | ATE cm | RPE deg/f | RPE deg/f interp | RPE cm/f | track ms med |" in md
     assert "| atsvo_ros:few |" in md and "## Definitions" in md
     assert (tmp_path / "o" / folder.name / "atsvo_ros_few" / "trajectory.tum").is_file()

@@ -3,9 +3,9 @@
 fr1_rpy turns 1.3-3 deg per frame (peaks of 5-10), the rates of a trotting or bounding robot, with
 rolling-shutter colour, motion blur, auto exposure and Kinect depth. Scored as the TUM tools and evo
 do (SE(3) alignment over all poses, RPE per frame), and no frame may be reported ``ok`` while it is
-wrong. Measured with the defaults: ATE 1.5 cm, RPE 0.35 deg/f (mean; RMSE 0.41), 0 of 299 ok frames
-more than 1.5 deg wrong (Open3D's point-to-plane odometry: 9.7 cm, 0.57 deg/f RMSE); the limits sit
-at ~2.3x (ATE) and ~1.5x (RPE) of that.
+wrong. Measured with the defaults: ATE 1.36 cm, RPE RMSE 0.338 deg/f (0.284 against the interpolated
+ground truth), 0 of 299 ok frames more than 1.5 deg wrong (Open3D's point-to-plane odometry: 9.7 cm,
+0.57 deg/f RMSE); the limits sit at ~2.6x (ATE) and ~1.8x (RPE) of that.
 """
 from __future__ import annotations
 
