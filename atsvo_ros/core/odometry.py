@@ -161,8 +161,9 @@ class Odometry:
         # the stamp plus the configured offset). The pose is published at the stamp plus the offset, the
         # exposure time on the stamps' clock: only the stamp's jitter off the frame clock is extrapolated
         # over (see _result), as moving it by the offset too would add the velocity's noise for nothing.
-        stamp = self._clock(frame.stamp_ns) + self._offset_ns
-        self._shift_ns = stamp - int(frame.stamp_ns) - self._offset_ns
+        on_clock = self._clock(frame.stamp_ns)
+        self._shift_ns = on_clock - int(frame.stamp_ns)
+        stamp = on_clock + self._offset_ns
         prepared = self.frontend.prepare(frame)
         newer = self.mapping.latest()  # a keyframe mapping finished meanwhile (threaded or remote mapping)
         if newer is not None:

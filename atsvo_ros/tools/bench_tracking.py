@@ -247,8 +247,8 @@ def add_tracking_args(p: argparse.ArgumentParser) -> None:
                    help="stamp the frames as a host-stamping driver does: delays of scale S seconds after the "
                         "exposure (TUM's Kinect: ~0.002; default 0, hardware stamps)")
     p.add_argument("--stamp-latency", type=float, default=0.0, metavar="S",
-                   help="with it, every stamp S seconds late besides the jitter (TUM's Kinect: ~0.010; pair it "
-                        "with --set rgb_camera.time_offset_s=-S)")
+                   help="a constant S seconds more on every stamp, besides the jitter (TUM's Kinect: ~0.010; "
+                        "the odometry takes it out with --set rgb_camera.time_offset_s=-S)")
     p.add_argument("--loss-limit-cm", type=float, default=10.0,
                    help="position error by which the status must have left ok (default 10)")
     p.add_argument("--json", default=None, help="write the per-sequence figures to this file")
