@@ -351,10 +351,11 @@ class NodeConfig:
                              "node slows the publisher down; replaying a bag where every frame must count)")
     use_imu: bool = _f(True, doc="feed topics.imu's gyro to the motion prediction")
     imu_max_wait_s: float = _f(0.25, 0.0, 10.0,
-                               doc="longest a paired frame waits (in stamp time) for the IMU sample after it; an "
-                                   "IMU further behind counts as silent and frames go without gyro (a dead IMU "
-                                   "costs this much latency once; samples arriving after their frame are dropped "
-                                   "and counted as imu_late)")
+                               doc="longest a paired frame waits for the IMU sample after it: an IMU this far "
+                                   "behind in stamp time (and, in the node, silent this long in wall time: a "
+                                   "backlog still draining is late, not dead) counts as stalled and frames go "
+                                   "without gyro, counted as frames_without_imu (a dead IMU costs this much "
+                                   "latency once; samples arriving after their frame are dropped, imu_late)")
     publish_tf: bool = _f(True, doc="broadcast odom -> base_link on /tf")
     diagnostics_period_s: float = _f(1.0, 0.0, 3600.0, lo_open=True, doc="period of /diagnostics")
     executor: str = _f("events", choices=("events", "multi_threaded", "single_threaded"),

@@ -4,7 +4,9 @@ Sensor data goes in as it arrives, in any interleaving: colour and depth images 
 sensor_msgs messages), event batches (or event messages, decoded here with the vectorised
 decoders), IMU samples and camera_info. The :class:`~atsvo_ros.io.sync.FrameAssembler` pairs colour
 with depth and cuts the event stream at frame stamps; the IMU stream is cut at the same stamps (a
-frame waits until the IMU has passed it, unless the IMU is ``node.imu_max_wait_s`` behind),
+frame waits until the IMU has passed it, unless the IMU is ``node.imu_max_wait_s`` behind in stamp
+time and, given an arrival ``clock`` (the node), has been silent that long: a starved node's backlogs
+drain one message per topic per executor cycle, so images get ahead of a stream that is only late),
 so the core sees, for every frame, exactly the samples up to its exposure time whatever order they
 arrived in (the replay and the ROS node give the same poses). :meth:`OdometryRuntime.poll` runs the
 core on every frame that became complete and returns one :class:`RuntimeOutput` per frame; output
@@ -122,8 +124,11 @@ class OdometryRuntime:
     def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel | None = None,
                  event_camera: CameraModel | None = None, *, use_events: bool | None = None,
                  logger: Logger | None = None, core_factory: Callable[..., OdometryCore] | None = None,
-                 log_interval_s: float = 10.0, sinks: Sequence[Sink] = ()) -> None:
+                 log_interval_s: float = 10.0, sinks: Sequence[Sink] = (),
+                 clock: Callable[[], int] | None = None) -> None:
+        """``clock``: arrival time in ns (the node: ``time.monotonic_ns``); None (replay) judges stalls by stamps."""
         self.config = config
+        self._clock = clock
         #: called with every output, right after its frame (the core holds that frame's state: surface, map)
         self.sinks: tuple[Sink, ...] = tuple(sinks)
         self._log = logger or _no_log
@@ -139,12 +144,14 @@ class OdometryRuntime:
         # events waiting for their frame: at most what the core would fold in over the assembler's wait
         wait_s = 0.25
         self.assembler = FrameAssembler(config.rig, with_events=self.use_events, max_event_wait_s=wait_s,
-                                        max_buffered_events=int(config.fusion.max_event_rate_ev_s * wait_s))
+                                        max_buffered_events=int(config.fusion.max_event_rate_ev_s * wait_s),
+                                        clock=clock)
         self.core: OdometryCore | None = None
         self._decoders: dict[str, Any] = {}
         self._imu: list[ImuBatch] = []  # samples after the last frame's cut
         self._imu_cut_ns: int | None = None
         self._imu_mark_ns: int | None = None  # newest IMU stamp received
+        self._imu_heard_ns: int | None = None  # arrival time (``clock``) of the last IMU samples
         self._await_imu: deque[tuple[RgbdFrame, EventBatch]] = deque()  # paired frames waiting for the IMU
         self._offset_ns = int(round(config.rgb_camera.time_offset_s * 1e9))
         self._imu_wait_ns = int(round(config.node.imu_max_wait_s * 1e9))  # then the IMU counts as silent
@@ -263,6 +270,8 @@ class OdometryRuntime:
         """
         if len(batch) == 0:
             return
+        if self._clock is not None:
+            self._imu_heard_ns = self._clock()  # alive, even when its samples turn out late
         self.counters["imu_samples"] += len(batch)
         cut = self._imu_cut_ns
         if cut is not None and batch.t_first_ns <= cut:
@@ -377,10 +386,16 @@ class OdometryRuntime:
         out = []
         mark = self._imu_mark_ns
         newest = self.assembler.newest_ns
-        stalled = mark is None or (newest is not None and newest - mark > self._imu_wait_ns)
+        silent = self._clock is None or self._imu_heard_ns is None or \
+            self._clock() - self._imu_heard_ns > self._imu_wait_ns
+        stalled = mark is None or (newest is not None and newest - mark > self._imu_wait_ns and silent) or \
+            len(self._await_imu) > self.assembler.max_pending
         while self._await_imu:
-            if not (final or stalled) and mark < int(self._await_imu[0][0].stamp_ns) + self._offset_ns:
+            behind = mark is None or mark < int(self._await_imu[0][0].stamp_ns) + self._offset_ns
+            if behind and not (final or stalled):
                 break
+            if behind and mark is not None and not final:
+                self.counters["frames_without_imu"] += 1  # released before the IMU passed it
             out.append(self._await_imu.popleft())
         return out
 

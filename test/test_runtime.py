@@ -41,24 +41,29 @@ def _messages(bag: Path, raw_events: bool = False):
 
 def _run(bag: Path, cfg, factory=None, raw_events: bool = False) -> tuple[OdometryRuntime, list]:
     rt = OdometryRuntime(cfg, core_factory=factory)
-    topics = cfg.topics
     outputs = []
     for topic, msgtype, msg in _messages(bag, raw_events):
-        if topic == topics.rgb_info:
-            rt.on_rgb_camera_info(msg)
-        elif topic == topics.event_info:
-            rt.on_event_camera_info(msg)
-        elif topic == topics.events:
-            rt.add_event_msg(msg, msgtype, topic)
-        elif topic == topics.rgb:
-            rt.add_rgb_msg(msg, topic)
-        elif topic == topics.depth:
-            rt.add_depth_msg(msg, topic)
-        elif topic == topics.imu:
-            rt.add_imu_msg(msg, topic)
+        _dispatch(rt, cfg, topic, msgtype, msg)
         outputs.extend(rt.poll())
     outputs.extend(rt.flush())
     return rt, outputs
+
+
+def _dispatch(rt: OdometryRuntime, cfg, topic: str, msgtype: str, msg) -> None:
+    """One message to the runtime, by topic, as the node's subscriptions do."""
+    topics = cfg.topics
+    if topic == topics.rgb_info:
+        rt.on_rgb_camera_info(msg)
+    elif topic == topics.event_info:
+        rt.on_event_camera_info(msg)
+    elif topic == topics.events:
+        rt.add_event_msg(msg, msgtype, topic)
+    elif topic == topics.rgb:
+        rt.add_rgb_msg(msg, topic)
+    elif topic == topics.depth:
+        rt.add_depth_msg(msg, topic)
+    elif topic == topics.imu:
+        rt.add_imu_msg(msg, topic)
 
 
 def test_runtime_tracks_and_matches_the_replay_tool(bag, tmp_path):
@@ -349,3 +354,113 @@ def test_sinks_get_every_output_right_after_its_frame():
     outputs = rt.poll()  # the five frames in one poll
     assert [o.result.stamp_ns for o in outputs] == [s for s, _ in seen] == stamps
     assert [frames for _, frames in seen] == [stamps[:i + 1] for i in range(5)]
+
+
+class _StreamRecording(_ImuRecording):
+    """Records, per frame, the IMU stamps and the events it had (a fusing core double)."""
+
+    supports_events = True
+
+    def __init__(self, config, rgb_camera, event_camera=None):
+        super().__init__(config, rgb_camera, event_camera)
+        self.n_events = 0
+        self.events_seen: list[tuple[int, int]] = []
+
+    def add_events(self, batch):
+        self.n_events += len(batch)
+
+    def process_frame(self, frame):
+        self.events_seen.append((int(frame.stamp_ns), self.n_events))
+        return super().process_frame(frame)
+
+
+def _deliver(rt, cfg, items, clock_at):
+    """Feed ``(topic, msgtype, msg)`` items, setting the arrival clock before each; returns the frames' records."""
+    for k, (topic, msgtype, msg) in enumerate(items):
+        clock_at(k)
+        _dispatch(rt, cfg, topic, msgtype, msg)
+        for inp in rt.pop_ready():
+            rt.process(inp)
+    return rt.core.seen, rt.core.events_seen
+
+
+def _sensor_messages(bag, cfg):
+    t = cfg.topics
+    return [m for m in _messages(bag) if m[0] in (t.rgb, t.depth, t.imu, t.events, t.rgb_info, t.event_info)]
+
+
+def test_a_starved_node_catching_up_gives_every_frame_its_imu_and_events(bag):
+    """The CI failure: a node starved of CPU for 0.4 s drains its backlogs one message per topic per executor
+    cycle, so the 30 Hz images catch up in stamp time long before the events and the IMU. Streams that are only
+    late must not count as stalled: with the arrival clock every frame gets what an in-order replay gives it;
+    judged by stamps alone (the old rule), frames went out without their IMU and events."""
+    from atsvo_ros.io.images import stamp_ns
+
+    cfg = load_config("synthetic")
+    items = _sensor_messages(bag, cfg)
+    t0 = stamp_ns(items[0][2])
+    stop_from, stop_to = t0 + 100_000_000, t0 + 500_000_000  # the node does not run in between
+    before = [m for m in items if stamp_ns(m[2]) < stop_from]
+    backlog = [m for m in items if stop_from <= stamp_ns(m[2]) < stop_to]
+    after = [m for m in items if stamp_ns(m[2]) >= stop_to]
+    per_topic: dict[str, list] = {}
+    for m in backlog:
+        per_topic.setdefault(m[0], []).append(m)
+    t = cfg.topics
+    order = [t.rgb, t.depth, t.rgb_info, t.event_info, t.imu, t.events]  # images first: the worst case
+    assert set(per_topic) == set(order)
+    drained = []
+    while any(per_topic.values()):  # one message per topic per cycle
+        drained += [per_topic[t].pop(0) for t in order if per_topic.get(t)]
+    starved = before + drained + after
+    now = [0]
+
+    def in_order(k):  # arrival = stamp
+        now[0] = stamp_ns(items[k][2]) - t0
+
+    def catching_up(k):  # stamps until the stop; the backlog arrives 50 us apart right after it; then live again
+        m = starved[k]
+        if k < len(before):
+            now[0] = stamp_ns(m[2]) - t0
+        elif k < len(before) + len(drained):
+            now[0] = stop_to - t0 + 50_000 * (k - len(before))
+        else:
+            now[0] = max(now[0] + 50_000, stamp_ns(m[2]) - t0)
+
+    replay = OdometryRuntime(cfg, core_factory=_StreamRecording)
+    ref = _deliver(replay, cfg, items, lambda k: None)
+    live = OdometryRuntime(cfg, core_factory=_StreamRecording, clock=lambda: now[0])
+    assert _deliver(live, cfg, items, in_order) == ref  # in order, the clock changes nothing
+    live = OdometryRuntime(cfg, core_factory=_StreamRecording, clock=lambda: now[0])
+    got = _deliver(live, cfg, starved, catching_up)
+    assert len(ref[0]) >= 15 and got == ref
+    assert live.counters["imu_late"] == 0 and live.counters["frames_without_imu"] == 0
+    assert live.assembler.stats.released_without_events == 0 and live.assembler.stats.late_events == 0
+    # judged by stamps alone, the same arrival order loses IMU samples and events
+    stamps_only = OdometryRuntime(cfg, core_factory=_StreamRecording)
+    assert _deliver(stamps_only, cfg, starved, lambda k: None) != ref
+    lost = stamps_only.counters, stamps_only.assembler.stats
+    assert lost[0]["imu_late"] > 0 and lost[1].released_without_events > 0 and lost[1].late_events > 0, lost
+
+
+def test_a_dead_stream_still_releases_frames_with_the_arrival_clock(bag):
+    """The IMU and the event camera die half way while images keep coming: with the arrival clock, frames wait
+    at most the stall time (stamp and wall) for them, then go without, counted."""
+    from atsvo_ros.io.images import stamp_ns
+
+    cfg = load_config("synthetic")
+    items = _sensor_messages(bag, cfg)
+    t0 = stamp_ns(items[0][2])
+    t_mid = t0 + 250_000_000
+    cut = [m for m in items if m[0] not in (cfg.topics.imu, cfg.topics.events) or stamp_ns(m[2]) < t_mid]
+    now = [0]
+    rt = OdometryRuntime(cfg, core_factory=_StreamRecording, clock=lambda: now[0])
+
+    def live(k):
+        now[0] = stamp_ns(cut[k][2]) - t0
+
+    seen, _ = _deliver(rt, cfg, cut, live)
+    n_frames = sum(1 for t, _, _ in items if t == cfg.topics.rgb)
+    wait_frames = int(cfg.node.imu_max_wait_s / 0.033) + 1
+    assert len(seen) >= n_frames - 1 - wait_frames
+    assert rt.counters["frames_without_imu"] > 0 and rt.assembler.stats.released_without_events > 0

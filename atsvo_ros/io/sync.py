@@ -8,10 +8,17 @@ counted. With events enabled, a pair is released once the event stream has advan
 together with every event in ``(previous frame stamp, frame stamp]``; if the event stream stalls for
 more than ``max_event_wait_s`` beyond a waiting frame, the frame is released with what has arrived
 (counted), so a silent event camera never blocks tracking.
+
+Stalled means behind in stamp time *and*, given an arrival ``clock`` (the live node), silent for
+``max_event_wait_s`` of that clock. Stamp time alone misjudges a live node that was starved of CPU:
+its subscriptions' backlogs drain one message per topic per executor cycle, so 30 Hz images catch up
+in stamp time long before a 1 kHz event stream does, though no event is missing. Without a clock (a
+bag replay, fed in log-time order) stamp time is the arrival time.
 """
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -91,8 +98,11 @@ class FrameAssembler:
     CLOCK_JUMP_NS = 1_000_000_000
 
     def __init__(self, rig: RigConfig, with_events: bool = True, max_event_wait_s: float = 0.25,
-                 max_pending: int = 30, max_buffered_events: int = 5_000_000) -> None:
+                 max_pending: int = 30, max_buffered_events: int = 5_000_000,
+                 clock: Callable[[], int] | None = None) -> None:
+        """See the module docstring; ``clock`` gives arrival times in ns (e.g. ``time.monotonic_ns``)."""
         self.rig = rig
+        self.clock = clock
         self.with_events = with_events
         self.tol_ns = int(round(rig.sync_tolerance_s * 1e9))
         self.max_wait_ns = int(round(max_event_wait_s * 1e9))
@@ -107,6 +117,7 @@ class FrameAssembler:
         self._pairs: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._events: list[EventBatch] = []
         self._event_mark_ns: int | None = None  # the event stream is complete up to here
+        self._events_heard_ns: int | None = None  # arrival time (``clock``) of the last event message
         self._last_cut_ns: int | None = None
         self._newest_ns = -(2**63)
         self._gaps_rgb, self._gaps_depth = StampGaps(self.CLOCK_JUMP_NS), StampGaps(self.CLOCK_JUMP_NS)
@@ -141,6 +152,8 @@ class FrameAssembler:
 
     def add_events(self, batch: EventBatch, complete_to_ns: int | None = None) -> None:
         """Events in time order; ``complete_to_ns`` (e.g. the message stamp) says the stream reached it."""
+        if self.clock is not None:
+            self._events_heard_ns = self.clock()
         if len(batch) and batch.t_first_ns < self._newest_ns - self.CLOCK_JUMP_NS:
             self._restart_clock()
         if len(batch):
@@ -167,7 +180,8 @@ class FrameAssembler:
             if self.with_events:
                 mark = self._event_mark_ns
                 complete = mark is not None and mark >= t
-                stalled = self._newest_ns - t > self.max_wait_ns or len(self._pairs) > self.max_pending
+                stalled = (self._newest_ns - t > self.max_wait_ns and self.silent(self._events_heard_ns)) or \
+                    len(self._pairs) > self.max_pending
                 if not (complete or stalled):
                     break
                 if not complete:
@@ -188,6 +202,10 @@ class FrameAssembler:
         self._rgb.clear()
         self._depth.clear()
         return out
+
+    def silent(self, heard_ns: int | None) -> bool:
+        """Whether a stream last heard at ``heard_ns`` (``clock`` time) counts as silent: always without a clock."""
+        return self.clock is None or heard_ns is None or self.clock() - heard_ns > self.max_wait_ns
 
     @property
     def n_pairs(self) -> int:

@@ -108,7 +108,9 @@ class TrackingNode(Node):
             return Odometry(config, rgb_camera, event_camera, mapping=self._make_mapping_port)
 
         make_core.supports_events = True
-        self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=make_core)
+        # arrival clock: a stream is stalled when silent, not merely behind (backlogs drain unevenly)
+        self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=make_core,
+                                       clock=time.monotonic_ns)
         self.queue: DropOldestQueue[FrameInput] = DropOldestQueue(nc.queue_size, merge=lambda old, new: new.after(old))
         self.worker: Worker[FrameInput] = Worker(self.queue, self._process, "atsvo-tracking", self._worker_failed)
 
@@ -345,7 +347,7 @@ class TrackingNode(Node):
                                  for s in dec.values()),
             "sync_dropped_rgb": sync.dropped_rgb, "sync_dropped_depth": sync.dropped_depth,
             "missing_rgb": sync.missing_rgb, "missing_depth": sync.missing_depth,
-            "frames_without_events": sync.released_without_events,
+            "frames_without_events": sync.released_without_events, "late_events": sync.late_events,
             "bad_snapshots": self.bad_snapshots,
             "keyframes": getattr(rt.core, "n_keyframes", 0) if rt.core is not None else 0,
             "mapping": mapping, "tf": self.tf_route, "worker": "running" if self.worker.alive else "stopped",

@@ -1,4 +1,5 @@
-"""config/fastdds_shm.xml: a valid Fast DDS profile that gives each process a 64 MiB shared-memory segment."""
+"""config/fastdds_shm.xml: a valid Fast DDS profile that gives each process a 64 MiB shared-memory segment and a
+receiving port queue that holds seconds of the robot's topics."""
 from __future__ import annotations
 
 import os
@@ -23,6 +24,8 @@ def test_profile_is_the_default_participant_with_a_large_shm_segment_and_udp():
     assert sorted(kinds.values()) == ["SHM", "UDPv4"]  # same host via SHM, other hosts still via UDP
     shm = next(d for d in descriptors.values() if d.findtext("f:type", namespaces=NS) == "SHM")
     assert int(shm.findtext("f:segment_size", namespaces=NS)) >= 16 * RGB8_640x480_BYTES
+    # ~1,300 messages/s on the robot (1 kHz event packets, 200 Hz IMU, images): a stalled node must not overflow
+    assert int(shm.findtext("f:port_queue_capacity", namespaces=NS)) >= 4 * 1300
     participant = root.find("f:profiles/f:participant", NS)
     assert participant.get("is_default_profile") == "true"
     used = [t.text for t in participant.iterfind("f:rtps/f:userTransports/f:transport_id", NS)]
@@ -34,35 +37,37 @@ SEGMENTS = """
 import rclpy
 rclpy.init()
 node = rclpy.create_node("profile_check")
-sizes = []
+sizes, ports = [], []
 with open("/proc/self/maps") as maps:
     for line in maps:
         path = line.split()[-1]
-        if path.startswith("/dev/shm/fastrtps_") and "port" not in path:
+        if path.startswith("/dev/shm/fastrtps_"):
             lo, hi = line.split()[0].split("-")
-            sizes.append(int(hi, 16) - int(lo, 16))
-print(max(sizes, default=0))
+            (ports if "port" in path else sizes).append(int(hi, 16) - int(lo, 16))
+print(max(ports, default=0), max(sizes, default=0))
 node.destroy_node()
 rclpy.shutdown()
 """
 
 
-def _largest_shm_segment(profile: Path | None) -> tuple[int, str]:
+def _largest_shm_segment(profile: Path | None) -> tuple[int, int, str]:
     env = {k: v for k, v in os.environ.items()
            if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")}
     if profile is not None:
         env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
     out = subprocess.run([sys.executable, "-c", SEGMENTS], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    return int(out.stdout.split()[-1]), out.stderr
+    port, segment = out.stdout.split()[-2:]
+    return int(segment), int(port), out.stderr
 
 
 def test_fast_dds_loads_the_profile_through_fastrtps_default_profiles_file():
     pytest.importorskip("rclpy", reason="rclpy is not installed (pip install -e '.[ros]')")
     if not Path("/proc/self/maps").is_file():
         pytest.skip("needs Linux /proc to see the shared-memory segments")
-    default_size, _ = _largest_shm_segment(None)
-    ours_size, stderr = _largest_shm_segment(PROFILE)
+    default_size, default_port, _ = _largest_shm_segment(None)
+    ours_size, ours_port, stderr = _largest_shm_segment(PROFILE)
     assert "XMLPARSER Error" not in stderr, stderr
     assert default_size < RGB8_640x480_BYTES  # Fast DDS default (512 KiB): a colour frame does not fit
     assert ours_size >= 16 * 2**20
+    assert ours_port >= 3 * default_port  # the port queue's mapping grew (measured: 204 KiB vs 52 KiB)
