@@ -37,37 +37,38 @@ SEGMENTS = """
 import rclpy
 rclpy.init()
 node = rclpy.create_node("profile_check")
-sizes, ports = [], []
+sizes = []
 with open("/proc/self/maps") as maps:
     for line in maps:
         path = line.split()[-1]
-        if path.startswith("/dev/shm/fastrtps_"):
+        if path.startswith("/dev/shm/fastrtps_") and "port" not in path:
             lo, hi = line.split()[0].split("-")
-            (ports if "port" in path else sizes).append(int(hi, 16) - int(lo, 16))
-print(max(ports, default=0), max(sizes, default=0))
+            sizes.append(int(hi, 16) - int(lo, 16))
+print(max(sizes, default=0))
 node.destroy_node()
 rclpy.shutdown()
 """
 
 
-def _largest_shm_segment(profile: Path | None) -> tuple[int, int, str]:
+def _largest_shm_segment(profile: Path | None) -> tuple[int, str]:
     env = {k: v for k, v in os.environ.items()
            if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")}
     if profile is not None:
         env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
     out = subprocess.run([sys.executable, "-c", SEGMENTS], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    port, segment = out.stdout.split()[-2:]
-    return int(segment), int(port), out.stderr
+    return int(out.stdout.split()[-1]), out.stderr
 
 
 def test_fast_dds_loads_the_profile_through_fastrtps_default_profiles_file():
     pytest.importorskip("rclpy", reason="rclpy is not installed (pip install -e '.[ros]')")
     if not Path("/proc/self/maps").is_file():
         pytest.skip("needs Linux /proc to see the shared-memory segments")
-    default_size, default_port, _ = _largest_shm_segment(None)
-    ours_size, ours_port, stderr = _largest_shm_segment(PROFILE)
+    default_size, _ = _largest_shm_segment(None)
+    ours_size, stderr = _largest_shm_segment(PROFILE)
     assert "XMLPARSER Error" not in stderr, stderr
     assert default_size < RGB8_640x480_BYTES  # Fast DDS default (512 KiB): a colour frame does not fit
     assert ours_size >= 16 * 2**20
-    assert ours_port >= 3 * default_port  # the port queue's mapping grew (measured: 204 KiB vs 52 KiB)
+    # The port queue's size is not checked here: a port is a file in /dev/shm shared by every process of the
+    # domain, sized by whichever process created it first (measured on fresh ports: 204 KiB with the profile,
+    # 52 KiB without; a later run without the profile opened the 204 KiB ones).
