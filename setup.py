@@ -94,7 +94,7 @@ setup(
             "atsvo-demo = atsvo_ros.tools.demo:main",
             "atsvo-sim = atsvo_ros.tools.sim:main",
             "atsvo-events = atsvo_ros.tools.events:main",
-            "atsvo-bench = atsvo_ros.tools.bench:main",
+            "atsvo-bench = atsvo_ros.bench.cli:main",
         ],
     },
 )

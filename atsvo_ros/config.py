@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from atsvo_ros.errors import ConfigError
 
@@ -48,13 +49,6 @@ class CameraConfig:
                               "host-stamping driver's latency, negative); the odometry is stamped at that time")
     frame_clock_frames: int = _f(30, 0, 10000, doc="frames of the line fitted to the image stamps to recover the "
                                  "camera's frame clock from host-stamp jitter (0 = use the stamps as they are)")
-
-    def model(self):
-        """The :class:`~atsvo_ros.core.camera.CameraModel` these values describe."""
-        from atsvo_ros.core.camera import CameraModel
-
-        return CameraModel(self.width, self.height, self.fx, self.fy, self.cx, self.cy,
-                           self.distortion_model, self.D)
 
 
 @dataclass(frozen=True)
@@ -476,15 +470,23 @@ def _check_cross_fields(obj: Any, prefix: str) -> None:
         if obj.depth_min_m >= obj.depth_max_m:
             raise ConfigError(f"{prefix}depth_min_m = {obj.depth_min_m} must be below "
                               f"{prefix}depth_max_m = {obj.depth_max_m}")
-        from atsvo_ros.core.geometry import check_pose
-        from atsvo_ros.errors import GeometryError
-
         for name in ("T_base_rgb", "T_rgb_event", "T_rgb_imu"):
-            try:
-                check_pose(np.asarray(getattr(obj, name)).reshape(4, 4), tol=1e-4)
-            except GeometryError as exc:
+            problem = _rigid_transform_problem(np.asarray(getattr(obj, name)).reshape(4, 4), tol=1e-4)
+            if problem is not None:
                 raise ConfigError(f"{prefix}{name} = {list(getattr(obj, name))} "
-                                  f"is not a rigid transform: {exc}") from None
+                                  f"is not a rigid transform: {problem}") from None
+
+
+def _rigid_transform_problem(T: np.ndarray, tol: float) -> str | None:
+    """Why a 4x4 matrix is not a rigid transform (None when it is): the config checks extrinsics on load."""
+    if not np.all(np.isfinite(T)):
+        return "pose contains NaN or inf"
+    R = T[:3, :3]
+    if np.abs(R @ R.T - np.eye(3)).max() > tol or np.linalg.det(R) < 0:
+        return "pose rotation block is not a proper rotation"
+    if np.abs(T[3] - np.array([0.0, 0.0, 0.0, 1.0])).max() > tol:
+        return "pose last row must be [0, 0, 0, 1]"
+    return None
 
 
 def config_from_dict(params: dict[str, Any]) -> AtsvoConfig:
@@ -548,7 +550,6 @@ def load_config(path: str | Path | None = None, node_name: str | None = None,
 
     ``path=None`` gives the defaults; ``overrides`` (dotted or nested keys) win over the file.
     """
-    import yaml
 
     params: dict[str, Any] = {}
     if path is not None:

@@ -11,7 +11,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.geometry import so3_log
 from atsvo_ros.sim.sequence import RgbdFrame, SequenceSpec, Simulation, iter_sequence
 

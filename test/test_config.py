@@ -7,6 +7,7 @@ import pytest
 import yaml
 
 from atsvo_ros.config import AtsvoConfig, config_dir, config_from_dict, flatten, load_config
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.errors import ConfigError
 
 
@@ -14,7 +15,7 @@ from atsvo_ros.errors import ConfigError
 def test_bundled_presets_load(name):
     cfg = load_config(name)
     assert isinstance(cfg, AtsvoConfig)
-    assert cfg.event_camera.model().width in (320, 346)
+    assert CameraModel.from_config(cfg.event_camera).width in (320, 346)
 
 
 def test_imu_topic_and_extrinsic_defaults_and_presets():

@@ -6,11 +6,11 @@ import threading
 import numpy as np
 import pytest
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.imu import ImuBatch
-from atsvo_ros.core.odometry import RgbdFrame
-from atsvo_ros.frame_queue import DropOldestQueue, Worker
-from atsvo_ros.runtime import FrameInput
+from atsvo_ros.core.odometry.odometry import RgbdFrame
+from atsvo_ros.runtime.frame_queue import DropOldestQueue, Worker
+from atsvo_ros.runtime.types import FrameInput
 
 
 def test_full_queue_drops_the_oldest_and_counts():

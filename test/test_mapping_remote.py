@@ -10,9 +10,9 @@ import pytest
 
 from atsvo_ros.config import load_config
 from atsvo_ros.core.frame import TrackingStatus
-from atsvo_ros.core.odometry import Odometry, RgbdFrame
+from atsvo_ros.core.odometry.odometry import Odometry, RgbdFrame
 from atsvo_ros.errors import WireError
-from atsvo_ros.mapping_remote import MappingServer, RemoteMapping, mapping_digest
+from atsvo_ros.runtime.mapping_remote import MappingServer, RemoteMapping, mapping_digest
 from atsvo_ros.sim.sequence import RgbdFrame as SimFrame
 from atsvo_ros.sim.sequence import SequenceSpec, iter_sequence, sequence_rig
 
@@ -124,7 +124,7 @@ def test_answers_of_other_sessions_are_ignored_and_garbage_raises(frames):
         link.close()
     assert first.session != link.port.session and link.server.n_sessions == 2
     served = MappingServer(cfg)
-    from atsvo_ros.core.tracking import Tracking
+    from atsvo_ros.core.tracking.tracking import Tracking
     from atsvo_ros.io.wire import PinholeLevels, encode_keyframe_request
 
     odo = Odometry(cfg, cam)

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.eval.metrics import EvalOptions, evaluate
 from atsvo_ros.io.msgtypes import register_event_types
 from atsvo_ros.io.trajectory import Trajectory, read_tum
-from atsvo_ros.runtime import OdometryRuntime
+from atsvo_ros.runtime.runtime import OdometryRuntime
 
 SIM_ARGS = ["--scenario", "trot", "--duration", "0.6", "--seed", "3", "--width", "160", "--height", "120",
             "--event-scale", "0.25", "--quiet"]
@@ -131,8 +132,8 @@ def test_frames_wait_for_camera_info_and_bad_input_is_counted_not_fatal(bag):
 
 def test_events_reach_the_core_cut_at_frame_stamps_from_messages_or_raw_bytes(bag):
     """With a core that fuses events, both input paths hand it the same events, cut at frame stamps."""
-    from atsvo_ros.core.events import EventBatch
-    from atsvo_ros.core.odometry import Odometry
+    from atsvo_ros.core.events.batch import EventBatch
+    from atsvo_ros.core.odometry.odometry import Odometry
 
     class Recording(Odometry):
 
@@ -344,7 +345,7 @@ def test_sinks_get_every_output_right_after_its_frame():
 
     cfg = load_config("synthetic")
     seen = []
-    rt = OdometryRuntime(cfg, cfg.rgb_camera.model(), use_events=False, core_factory=Core,
+    rt = OdometryRuntime(cfg, CameraModel.from_config(cfg.rgb_camera), use_events=False, core_factory=Core,
                          sinks=[lambda out, core: seen.append((out.result.stamp_ns, list(core.frames)))])
     w, h = cfg.rgb_camera.width, cfg.rgb_camera.height
     stamps = [1_000_000_000 + i * 33_000_000 for i in range(5)]

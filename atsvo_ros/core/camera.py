@@ -12,7 +12,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
+from atsvo_ros.config import CameraConfig
 from atsvo_ros.errors import CalibrationError
 
 _N_COEFFS = {"none": 0, "plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
@@ -55,6 +57,11 @@ class CameraModel:
 
     # ------------------------------------------------------------------ construction
     @classmethod
+    def from_config(cls, cfg: CameraConfig) -> CameraModel:
+        """The camera a :class:`~atsvo_ros.config.CameraConfig` describes (fallback intrinsics of a preset)."""
+        return cls(cfg.width, cfg.height, cfg.fx, cfg.fy, cfg.cx, cfg.cy, cfg.distortion_model, cfg.D)
+
+    @classmethod
     def from_camera_info(cls, msg: Any) -> CameraModel:
         """Build from a sensor_msgs/CameraInfo (rclpy, rosbags ROS 1 or ROS 2 classes)."""
         K = np.asarray(getattr(msg, "k", None) if hasattr(msg, "k") else msg.K, dtype=np.float64)
@@ -89,7 +96,6 @@ class CameraModel:
     @classmethod
     def from_yaml(cls, path: str | Path) -> CameraModel:
         """Load a ROS camera_calibration YAML file."""
-        import yaml
 
         try:
             data = yaml.safe_load(Path(path).read_text())

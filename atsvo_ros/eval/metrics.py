@@ -43,7 +43,7 @@ import numpy as np
 
 from atsvo_ros.core.geometry import interpolate_trajectory, se3_inv
 from atsvo_ros.errors import EvaluationError
-from atsvo_ros.io.trajectory import Trajectory
+from atsvo_ros.io.trajectory import Trajectory, read_tum
 
 ALIGN_METHODS = ("paper", "se3", "sim3", "none")
 
@@ -359,7 +359,6 @@ def _divergence_index(pos_err: np.ndarray, rot_d: np.ndarray, trans_d: np.ndarra
 
 def evaluate_files(gt_path: str, est_path: str, opts: EvalOptions | None = None) -> EvalResult:
     """:func:`evaluate` on two TUM files."""
-    from atsvo_ros.io.trajectory import read_tum
 
     return evaluate(read_tum(gt_path), read_tum(est_path), opts)
 

@@ -5,7 +5,7 @@ Open3D (optional extra ``peers``) is run frame to frame through its tensor API
 ``point_to_plane`` (depth only, ICP on vertex/normal maps), ``intensity`` (photometric, Steinbruecker
 et al.) and ``hybrid`` (both, Park et al.). The input is what our core tracks: the colour image
 undistorted with :meth:`CameraModel.rectify_maps` (bilinear) and the depth remapped with the same maps
-(nearest neighbour), as :class:`atsvo_ros.core.odometry.Odometry` does, with the pinhole K. Each frame
+(nearest neighbour), as :class:`atsvo_ros.core.odometry.odometry.Odometry` does, with the pinhole K. Each frame
 is registered to the previous one (identity initial guess, Open3D's default criteria and loss
 parameters unless given) and the relative poses are chained into ``T_world_cam`` with the first
 frame at the origin.
@@ -20,10 +20,13 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import cv2
 import numpy as np
+from tqdm import tqdm
 
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.errors import EvaluationError
+from atsvo_ros.io.trajectory import Trajectory
 
 #: our method names -> Open3D's ``Method`` members
 OPEN3D_METHODS: dict[str, str] = {"point_to_plane": "PointToPlane", "hybrid": "Hybrid", "intensity": "Intensity"}
@@ -49,7 +52,6 @@ class PeerRun:
 
     def trajectory(self):
         """The poses as a :class:`~atsvo_ros.io.trajectory.Trajectory`."""
-        from atsvo_ros.io.trajectory import Trajectory
 
         return Trajectory(self.stamps_ns, self.T_world_cam)
 
@@ -70,7 +72,6 @@ def undistorted_frames(frames: Iterable[tuple[int, np.ndarray, np.ndarray]],
     The colour image is resampled bilinearly and the depth by nearest neighbour onto the pinhole
     grid of ``camera`` (no-op for an undistorted camera), as our odometry's preprocessing does.
     """
-    import cv2
 
     maps = camera.rectify_maps() if camera.is_distorted else None
     for stamp, rgb, depth in frames:
@@ -108,7 +109,6 @@ def run_open3d(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: Cam
         progress: show a progress bar on stderr.
     """
     o3d = import_open3d()
-    from tqdm import tqdm
 
     unknown = [m for m in methods if m not in OPEN3D_METHODS]
     if unknown or not methods:

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 
 from atsvo_ros.eval.metrics import EvalResult
@@ -14,10 +16,7 @@ from atsvo_ros.io.trajectory import Trajectory
 
 
 def _plt():
-    import matplotlib
-
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
 
     return plt
 

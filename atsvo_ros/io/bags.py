@@ -12,14 +12,20 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Iterator, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
+from rosbags.highlevel import AnyReader
 
-from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.config import load_config
+from atsvo_ros.core.geometry import pose_from_tq, se3_inv
 from atsvo_ros.errors import BagError, TransformError
+from atsvo_ros.io.decode import EventDecoder
+from atsvo_ros.io.msgtypes import EVENT_MSGTYPES, register_event_types, typestore
 from atsvo_ros.io.read_report import ReadReport, container_errors, describe, iter_messages
 
 _log = logging.getLogger(__name__)
@@ -72,8 +78,6 @@ class BagMessage:
 
 
 def _metadata_ok(folder: Path) -> bool:
-    import yaml
-
     meta = folder / "metadata.yaml"
     if not meta.is_file():
         return False
@@ -91,9 +95,7 @@ def open_any_reader(path: str | Path | Sequence[str | Path]) -> Any:
     file of a bag directory whose ``metadata.yaml`` is missing or names no storage plugin. Several
     ROS 1 bags (e.g. MVSEC's ``*_data.bag`` and ``*_gt.bag``) are read as one, merged in time.
     """
-    from rosbags.highlevel import AnyReader
 
-    from atsvo_ros.io.msgtypes import typestore
 
     if not isinstance(path, (str, Path)):
         paths = [Path(q) for q in path]
@@ -137,7 +139,6 @@ def open_any_reader(path: str | Path | Sequence[str | Path]) -> Any:
 
 def preset_topics(name: str) -> dict[str, str]:
     """The ``topics`` section of a bundled preset (or of a YAML path) as role -> topic."""
-    from atsvo_ros.config import load_config
 
     t = load_config(name).topics
     return {r: getattr(t, r) for r in ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth", "imu")}
@@ -145,7 +146,6 @@ def preset_topics(name: str) -> dict[str, str]:
 
 def _detect(role: str, topics: dict[str, str], chosen: dict[str, str | None]) -> str | None:
     """Pick a topic for ``role`` from message types and names when no preset names it."""
-    from atsvo_ros.io.msgtypes import EVENT_MSGTYPES
 
     def only(cands: list[str]) -> str | None:
         return cands[0] if len(cands) == 1 else None
@@ -205,7 +205,6 @@ def resolve_topics(topics: dict[str, str], explicit: dict[str, str | None] | Non
 
 def _event_decoder(msgtype: str, ros_version: int) -> Any:
     """The events engineer's stateful per-topic decoder (roll-over state, counted drops)."""
-    from atsvo_ros.io.decode import EventDecoder
 
     return EventDecoder(msgtype, ros_version)
 
@@ -216,7 +215,6 @@ def _open_with_default_types(reader: Any) -> bool:
     Mirrors what AnyReader does for bags without definitions; False when the storage itself
     cannot be opened (then the bag is really unreadable).
     """
-    from contextlib import ExitStack
 
     reader.stack = ExitStack()
     try:
@@ -256,7 +254,6 @@ class Bag:
             self.reader = open_any_reader(paths)
             if not _open_with_default_types(self.reader):
                 raise BagError(f"cannot open bag {self.path}: {describe(exc)}") from None
-        from atsvo_ros.io.msgtypes import register_event_types
 
         self.ros_version = 2 if self.reader.is2 else 1
         register_event_types(self.reader.typestore, self.ros_version)
@@ -416,7 +413,6 @@ def pose_from_msg(msg: Any, topic: str = "") -> np.ndarray:
     Raises :class:`TransformError` naming the topic, frames and stamp when the translation or the
     quaternion is not finite or the quaternion has zero norm (a non-unit quaternion is normalised).
     """
-    from atsvo_ros.core.geometry import pose_from_tq
 
     if hasattr(msg, "transform"):
         tr, q = msg.transform.translation, msg.transform.rotation

@@ -12,7 +12,7 @@ import struct
 
 import numpy as np
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import DecodeError
 from atsvo_ros.io.decode.layout import ROS1_DVS_EVENT, align, dvs_cdr_layout
 

@@ -13,10 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+from rosbags import rosbag1, rosbag2
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import BagError, DecodeError
+from atsvo_ros.io.aedat import aedat4_event_stream, iter_aedat4
 from atsvo_ros.io.decode import DVS_TYPES, PACKET_TYPES, DecodeStats, EventDecoder, normalize_msgtype
+from atsvo_ros.io.decode.prophesee_raw import read_prophesee_raw
+from atsvo_ros.io.mvsec import MvsecReader
 from atsvo_ros.io.read_report import ReadReport, container_errors, describe, iter_messages
 
 EVENT_TYPES = PACKET_TYPES | DVS_TYPES
@@ -48,15 +52,11 @@ class EventSource:
         if self.kind in ("bag1", "bag2"):
             yield from self._iter_bag()
         elif self.kind == "aedat4":
-            from atsvo_ros.io.aedat import iter_aedat4
-
             self.report = ReadReport(str(self.path))
             for b in iter_aedat4(self.path, self.report):
                 self._count(b)
                 yield b
         elif self.kind == "raw":
-            from atsvo_ros.io.decode.prophesee_raw import read_prophesee_raw
-
             b, head = read_prophesee_raw(self.path)
             self.encoding = f"evt{head.evt[0]}"
             self._count(b)
@@ -97,11 +97,8 @@ class EventSource:
         self.stats.width, self.stats.height, self.stats.encoding = self.width, self.height, self.encoding
 
     def _reader(self):
-        if self.kind == "bag1":
-            from rosbags.rosbag1 import Reader
-        else:
-            from rosbags.rosbag2 import Reader
-        return Reader(self._storage or self.path)
+        reader = rosbag1.Reader if self.kind == "bag1" else rosbag2.Reader
+        return reader(self._storage or self.path)
 
     def _open_reader(self):
         """The opened low-level reader (close it); BagError naming the file when it cannot be opened."""
@@ -134,8 +131,6 @@ class EventSource:
         return b
 
     def _iter_mvsec(self) -> Iterator[EventBatch]:
-        from atsvo_ros.io.mvsec import MvsecReader
-
         with MvsecReader(self.path) as reader:
             if not reader.has("events"):
                 raise DecodeError(f"{self.path}: no davis/left/events dataset in this MVSEC file")
@@ -211,8 +206,6 @@ def open_events(path: str | Path, topic: str | None = None, **decoder_options) -
         src.topic, src.msgtype, src.n_messages = chosen[0]
         return src
     if suffix == ".aedat4":
-        from atsvo_ros.io.aedat import aedat4_event_stream
-
         _, w, h = aedat4_event_stream(p)
         return EventSource(p, "aedat4", width=w, height=h, encoding="aedat4")
     if suffix == ".raw":
@@ -221,3 +214,6 @@ def open_events(path: str | Path, topic: str | None = None, **decoder_options) -
         return EventSource(p, "mvsec", encoding="mvsec_hdf5")
     raise DecodeError(f"{p}: unsupported event file type {suffix or '(none)'}; "
                       "supported: ROS 1/2 bags, .mcap, .db3, .aedat4, .raw (Prophesee), MVSEC .hdf5")
+
+
+__all__ = ["EVENT_TYPES", "EventSource", "open_events"]

@@ -9,9 +9,12 @@ from __future__ import annotations
 
 from typing import Any
 
+import cv2
 import numpy as np
 
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.errors import ImageError
+from atsvo_ros.io.ros_out import time_to_ns
 
 #: encoding -> (numpy dtype, channels)
 ENCODINGS: dict[str, tuple[str, int]] = {
@@ -56,7 +59,6 @@ def compressed_to_numpy(msg: Any) -> np.ndarray:
 
     Colour images come back as RGB, 16-bit depth as uint16, 32-bit compressedDepth is not supported.
     """
-    import cv2
 
     fmt = str(getattr(msg, "format", "") or "").lower()
     data = np.frombuffer(bytes(msg.data), dtype=np.uint8) if not isinstance(msg.data, np.ndarray) else msg.data
@@ -133,14 +135,12 @@ def depth_from_msg(msg: Any, depth_scale_m: float = 0.001, depth_min_m: float = 
 
 def camera_from_info(msg: Any):
     """:class:`~atsvo_ros.core.camera.CameraModel` from a sensor_msgs/CameraInfo."""
-    from atsvo_ros.core.camera import CameraModel
 
     return CameraModel.from_camera_info(msg)
 
 
 def stamp_ns(msg: Any) -> int:
     """Header stamp in int64 nanoseconds (ROS 2 ``sec/nanosec`` or ROS 1 ``secs/nsecs``)."""
-    from atsvo_ros.io.ros_out import time_to_ns
 
     return time_to_ns(msg.header.stamp)
 

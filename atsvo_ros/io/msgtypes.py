@@ -10,6 +10,7 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any
 
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 _EVENT_PACKET = """std_msgs/Header header
@@ -72,7 +73,6 @@ def transient_local_qos() -> Any:
 
     ``ros2 bag play`` offers it again, so a late subscriber (RViz, tf2) still gets the message.
     """
-    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
     never = QosTime(sec=0x7FFFFFFF, nsec=0xFFFFFFFF)
     return Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, never, never,

@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import BagError
+from atsvo_ros.io.trajectory import Trajectory
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,6 @@ class MvsecReader:
 
     def ground_truth(self):
         """The ``pose`` dataset as a :class:`~atsvo_ros.io.trajectory.Trajectory` (camera in world)."""
-        from atsvo_ros.io.trajectory import Trajectory
 
         pose, ts = self._get("pose"), self._get("pose_ts")
         if pose is None or ts is None:

@@ -15,6 +15,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from rosbags.highlevel import AnyReaderError
+from rosbags.rosbag1 import ReaderError as Reader1Error
+from rosbags.rosbag2 import ReaderError as Reader2Error
+from rosbags.serde import SerdeError
+from rosbags.typesys import TypesysError
+
 #: most errors kept verbatim in a report (the count goes on)
 MAX_ERRORS = 20
 
@@ -24,10 +30,6 @@ def container_errors() -> tuple[type[BaseException], ...]:
 
     Only ever caught around calls into those libraries, never around our own code.
     """
-    from rosbags.highlevel import AnyReaderError
-    from rosbags.rosbag1 import ReaderError as Reader1Error
-    from rosbags.rosbag2 import ReaderError as Reader2Error
-    from rosbags.typesys import TypesysError
 
     errors: list[type[BaseException]] = [AnyReaderError, Reader1Error, Reader2Error, TypesysError,
                                          AssertionError, KeyError, IndexError, ValueError, struct.error, EOFError,
@@ -45,12 +47,7 @@ def container_errors() -> tuple[type[BaseException], ...]:
         errors.append(zstandard.ZstdError)
     except ImportError:  # pragma: no cover
         pass
-    try:
-        from rosbags.serde import SerdeError
-
-        errors.append(SerdeError)
-    except ImportError:  # pragma: no cover
-        pass
+    errors.append(SerdeError)
     return tuple(errors)
 
 

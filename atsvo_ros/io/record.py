@@ -1,8 +1,8 @@
 """A run as a ROS 2 bag (mcap) that RViz (through ``ros2 bag play``), Foxglove and rosbags open.
 
-:class:`BagRecorder` is an output sink of :class:`~atsvo_ros.runtime.OdometryRuntime` (``atsvo-replay
+:class:`BagRecorder` is an output sink of :class:`~atsvo_ros.runtime.runtime.OdometryRuntime` (``atsvo-replay
 --record OUT.mcap``): after every frame it writes what the ROS nodes publish for it, built by the
-same code (:mod:`atsvo_ros.io.ros_out`, :mod:`atsvo_ros.core.debug_images`) with rosbags' message
+same code (:mod:`atsvo_ros.io.ros_out`, :mod:`atsvo_ros.core.events.debug_images`) with rosbags' message
 classes, stamped with the frame stamp (log time = header stamp):
 
 =====================================  ===========================  =====================================
@@ -30,16 +30,18 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
 from atsvo_ros.config import AtsvoConfig
-from atsvo_ros.core.debug_images import render_debug_images
-from atsvo_ros.core.event_frontend import EventFrontEnd
+from atsvo_ros.core.events.debug_images import render_debug_images
+from atsvo_ros.core.events.frontend import EventFrontEnd
 from atsvo_ros.core.geometry import interpolate_trajectory, se3_inv
-from atsvo_ros.core.map import MapSnapshot
+from atsvo_ros.core.mapping.map import MapSnapshot
 from atsvo_ros.errors import RecordError
 from atsvo_ros.io.msgtypes import transient_local_qos, typestore
 from atsvo_ros.io.ros_out import (
@@ -82,9 +84,7 @@ def check_record_path(path: str | Path, force: bool = False) -> Path:
 
 def mcap_storage() -> tuple[Any, Any]:
     """rosbags' ``(Writer, StoragePlugin.MCAP)``; :class:`RecordError` when this rosbags cannot write mcap."""
-    from importlib.metadata import PackageNotFoundError, version
 
-    from rosbags.rosbag2 import StoragePlugin, Writer
 
     plugin = getattr(StoragePlugin, "MCAP", None)
     if plugin is None or plugin not in getattr(Writer, "STORAGE_PLUGINS", {}):
@@ -130,7 +130,6 @@ class BagRecorder:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._staging = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.atsvo-record-partial-", dir=self.path.parent))
         self._writer = writer_cls(self._staging / self.path.stem, version=9, storage_plugin=plugin)
-        from rosbags.rosbag2 import CompressionFormat, CompressionMode
 
         storage = getattr(CompressionMode, "STORAGE", None)
         if storage is not None:  # zstd chunks: the debug images are mostly black

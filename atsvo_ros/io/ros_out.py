@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from atsvo_ros.core.geometry import quat_from_rotmat, se3_inv, so3_log
+from atsvo_ros.core.geometry import pose_from_tq, quat_from_rotmat, se3_inv, so3_log, transform_points
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,6 @@ def transform_msg(classes: MsgClasses, stamp_ns: int, T_parent_child: np.ndarray
 
 def pose_from_transform_msg(msg: Any) -> np.ndarray:
     """4x4 pose from a geometry_msgs/Transform or Pose (fields translation/rotation or position/orientation)."""
-    from atsvo_ros.core.geometry import pose_from_tq
 
     t = getattr(msg, "translation", None) or msg.position
     q = getattr(msg, "rotation", None) or msg.orientation
@@ -122,7 +121,6 @@ def map_cloud_data(points_w: np.ndarray, intensity: np.ndarray, T_odom_world: np
     ``intensity`` is each point's brightness-normalised intensity in its host keyframe (0-255 scale), so
     RViz / Foxglove can colour the cloud like the scene.
     """
-    from atsvo_ros.core.geometry import transform_points
 
     p = np.asarray(points_w, dtype=np.float64).reshape(-1, 3)
     out = np.empty((len(p), 4), dtype="<f4")

@@ -1,7 +1,7 @@
 """Recorded sensor streams as replay sources: ROS 1/2 bags, MVSEC HDF5 files, TUM RGB-D folders.
 
 A source knows its cameras and extrinsics (:meth:`ReplaySource.setup`) and feeds its messages, in
-recording order, into a :class:`SensorSink` (the :class:`~atsvo_ros.runtime.OdometryRuntime`), one
+recording order, into a :class:`SensorSink` (the :class:`~atsvo_ros.runtime.runtime.OdometryRuntime`), one
 message per generator step, collecting ground truth on the side. Damage it survives (unreadable
 records, unusable poses) is reported by :meth:`ReplaySource.read_problems`.
 """
@@ -17,10 +17,14 @@ import numpy as np
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.errors import BagError, TransformError
+from atsvo_ros.io.bags import Bag, StaticTf, pose_from_msg
+from atsvo_ros.io.images import depth_to_metres, stamp_ns
+from atsvo_ros.io.mvsec import MvsecReader
+from atsvo_ros.io.tum_rgbd import TumSource, is_tum_folder
 
 
 class SensorSink(Protocol):
-    """Where a source puts its data (implemented by :class:`atsvo_ros.runtime.OdometryRuntime`)."""
+    """Where a source puts its data (implemented by :class:`atsvo_ros.runtime.runtime.OdometryRuntime`)."""
 
     def add_rgb(self, stamp_ns: int, image: np.ndarray) -> None: ...
 
@@ -74,11 +78,11 @@ def _flat(T: np.ndarray) -> tuple[float, ...]:
 
 def _cameras(cfg: AtsvoConfig, first: dict[str, Any], notes: list[str]) -> tuple[CameraModel, CameraModel]:
     """Colour / event camera models: camera_info when present and allowed, else the config."""
-    rgb_cam = cfg.rgb_camera.model()
+    rgb_cam = CameraModel.from_config(cfg.rgb_camera)
     if cfg.rgb_camera.use_camera_info and "rgb_info" in first:
         rgb_cam = CameraModel.from_camera_info(first["rgb_info"])
         notes.append("colour intrinsics from camera_info")
-    ev_cam = cfg.event_camera.model()
+    ev_cam = CameraModel.from_config(cfg.event_camera)
     if cfg.event_camera.use_camera_info and "event_info" in first:
         ev_cam = CameraModel.from_camera_info(first["event_info"])
     return rgb_cam, ev_cam
@@ -86,7 +90,6 @@ def _cameras(cfg: AtsvoConfig, first: dict[str, Any], notes: list[str]) -> tuple
 
 def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[str]) -> AtsvoConfig:
     """T_base_rgb / T_rgb_event / T_rgb_imu from /tf_static when it connects the frames, else the config."""
-    from atsvo_ros.io.bags import StaticTf
 
     if "tf_static" not in first:
         return cfg
@@ -114,8 +117,6 @@ class BagSource:
     preset = None
 
     def __init__(self, paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> None:
-        from atsvo_ros.io.bags import Bag
-
         self.bag = Bag(paths, topics=topics, config_topics=vars(config.topics) if config else None)
         self.topic_types = self.bag.topic_types
         self.bad_poses: list[str] = []  # ground-truth messages skipped (NaN, zero quaternion)
@@ -142,8 +143,6 @@ class BagSource:
 
     def feed(self, sink: SensorSink, roles: tuple[str, ...], gt: list | None) -> Iterator[None]:
         """Generator: one message of ``roles`` into ``sink`` per step (ground truth into ``gt``)."""
-        from atsvo_ros.io.bags import pose_from_msg
-        from atsvo_ros.io.images import stamp_ns
 
         wanted = [r for r in roles if self.has(r)] + (["ground_truth"] if gt is not None else [])
         for m in self.bag.messages(wanted):
@@ -182,8 +181,6 @@ class MvsecSource:
     preset = "mvsec"
 
     def __init__(self, path: Path) -> None:
-        from atsvo_ros.io.mvsec import MvsecReader
-
         gt = path.with_name(path.name.replace("_data", "_gt"))
         self.reader = MvsecReader(path, gt if gt != path and gt.is_file() else None)
         self.preset_note = "config preset mvsec (MVSEC HDF5 file)"
@@ -210,11 +207,10 @@ class MvsecSource:
     def setup(self, config: AtsvoConfig, notes: list[str]) -> tuple[AtsvoConfig, CameraModel, CameraModel]:
         notes.append("cameras and extrinsics from the configuration (MVSEC HDF5)")
         self._rig = config.rig
-        return config, config.rgb_camera.model(), config.event_camera.model()
+        return config, CameraModel.from_config(config.rgb_camera), CameraModel.from_config(config.event_camera)
 
     def feed(self, sink: SensorSink, roles: tuple[str, ...], gt: list | None) -> Iterator[None]:
         """Generator: one image, depth map or event slice into ``sink`` per step (after :meth:`setup`)."""
-        from atsvo_ros.io.images import depth_to_metres
 
         if gt is not None and self.reader.has("ground_truth"):
             g = self.reader.ground_truth()
@@ -239,7 +235,6 @@ class MvsecSource:
 
 def open_source(paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> ReplaySource:
     """The source for ``paths``: a TUM folder, an MVSEC HDF5 file, or ROS bags (several ROS 1 bags merge)."""
-    from atsvo_ros.io.tum_rgbd import TumSource, is_tum_folder
 
     if is_tum_folder(paths[0]):
         if len(paths) > 1:

@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from atsvo_ros.config import RigConfig
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.frame import RgbdFrame
+from atsvo_ros.io.images import colour_from_msg, depth_from_msg, stamp_ns
 
 
 @dataclass
@@ -139,13 +140,11 @@ class FrameAssembler:
 
     def add_rgb_msg(self, msg: Any) -> None:
         """sensor_msgs/Image or CompressedImage (rclpy or rosbags)."""
-        from atsvo_ros.io.images import colour_from_msg, stamp_ns
 
         self.add_rgb(stamp_ns(msg), colour_from_msg(msg))
 
     def add_depth_msg(self, msg: Any) -> None:
         """Depth image message: 16UC1 scaled by ``rig.depth_scale_m``, 32FC1 metres, range-checked."""
-        from atsvo_ros.io.images import depth_from_msg, stamp_ns
 
         self.add_depth(stamp_ns(msg), depth_from_msg(msg, self.rig.depth_scale_m, self.rig.depth_min_m,
                                                      self.rig.depth_max_m))

@@ -144,3 +144,6 @@ def write_tum(path: str | Path, traj: Trajectory, header: str | None = None) -> 
         for s, tt, qq in zip(traj.stamps_ns, t, q):
             f.write(f"{format_stamp(s)} {tt[0]:.9f} {tt[1]:.9f} {tt[2]:.9f} "
                     f"{qq[0]:.9f} {qq[1]:.9f} {qq[2]:.9f} {qq[3]:.9f}\n")
+
+
+__all__ = ["Trajectory", "format_stamp", "read_tum", "write_tum"]

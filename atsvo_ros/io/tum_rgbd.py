@@ -18,10 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.errors import ConfigError, DatasetError, ImageError
-from atsvo_ros.io.trajectory import _seconds_to_ns
+from atsvo_ros.io.images import depth_to_metres
+from atsvo_ros.io.trajectory import _seconds_to_ns, read_tum
 
 #: metres per depth unit in TUM's 16-bit depth PNGs
 TUM_DEPTH_SCALE_M = 1.0 / 5000.0
@@ -156,8 +159,6 @@ def detect_tum_preset(folder: str | Path) -> tuple[str, str] | None:
 
 
 def _imread(path: Path, entry: TumEntry, flags: int) -> np.ndarray:
-    import cv2
-
     if not path.is_file():
         raise DatasetError(f"{entry.list_file}:{entry.line}: image {path} does not exist")
     img = cv2.imread(str(path), flags)
@@ -168,7 +169,6 @@ def _imread(path: Path, entry: TumEntry, flags: int) -> np.ndarray:
 
 def read_colour(entry: TumEntry) -> np.ndarray:
     """RGB uint8 (H, W, 3) of a colour entry."""
-    import cv2
 
     img = _imread(entry.path, entry, cv2.IMREAD_COLOR)
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
@@ -176,7 +176,6 @@ def read_colour(entry: TumEntry) -> np.ndarray:
 
 def read_depth(entry: TumEntry) -> np.ndarray:
     """Raw uint16 depth (H, W) of a depth entry (TUM: 5000 units per metre, 0 = none)."""
-    import cv2
 
     img = _imread(entry.path, entry, cv2.IMREAD_UNCHANGED)
     if img.dtype != np.uint16 or img.ndim != 2:
@@ -246,7 +245,6 @@ class TumRgbdReader:
 
     def ground_truth(self):
         """groundtruth.txt as a :class:`~atsvo_ros.io.trajectory.Trajectory` (colour optical frame in world)."""
-        from atsvo_ros.io.trajectory import read_tum
 
         if self.groundtruth_path is None:
             raise DatasetError(f"{self.folder} has no groundtruth.txt")
@@ -323,11 +321,10 @@ class TumSource:
         if not np.isclose(config.rig.depth_scale_m, TUM_DEPTH_SCALE_M, rtol=1e-9):
             notes.append(f"rig.depth_scale_m = {config.rig.depth_scale_m} differs from TUM's 1/5000 m")
         self._rig = config.rig
-        return config, config.rgb_camera.model(), config.event_camera.model()
+        return config, CameraModel.from_config(config.rgb_camera), CameraModel.from_config(config.event_camera)
 
     def feed(self, sink: Any, roles: tuple[str, ...], gt: list | None) -> Iterator[None]:
         """Generator: one colour image or depth map into ``sink`` per step (ground truth into ``gt``)."""
-        from atsvo_ros.io.images import depth_to_metres
 
         if gt is not None and self.reader.has("ground_truth"):
             g = self.reader.ground_truth()

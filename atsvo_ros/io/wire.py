@@ -31,8 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from atsvo_ros.core.map import Keyframe, MapSnapshot
-from atsvo_ros.core.mapper import KeyframeRequest
+from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.image.frontend import PreparedFrame
+from atsvo_ros.core.image.pyramid import build_pyramid, image_pyramid_with_gradients, pyramid_cameras
+from atsvo_ros.core.mapping.map import Keyframe, MapSnapshot
+from atsvo_ros.core.mapping.mapper import KeyframeRequest
+from atsvo_ros.core.rolling_shutter import RollingShutter
 from atsvo_ros.errors import WireError
 
 MAGIC = b"ATSW"
@@ -141,8 +145,6 @@ class PinholeLevels:
 
     def cameras(self) -> list:
         """The pyramid cameras, as the tracking side has them."""
-        from atsvo_ros.core.camera import CameraModel
-        from atsvo_ros.core.pyramid import pyramid_cameras
 
         cam = CameraModel(self.width, self.height, self.fx, self.fy, self.cx, self.cy, "none", ())
         return pyramid_cameras(cam, self.n_levels)
@@ -187,9 +189,6 @@ def encode_keyframe_request(session: str, seq: int, request: KeyframeRequest, ca
 
 def decode_keyframe_request(data: bytes | bytearray | memoryview) -> WireRequest:
     """The request (with a frame whose pyramid is rebuilt from the intensity image) and its routing."""
-    from atsvo_ros.core.frontend import PreparedFrame
-    from atsvo_ros.core.pyramid import build_pyramid, image_pyramid_with_gradients
-    from atsvo_ros.core.residuals import RollingShutter
 
     what = "keyframe request"
     fields, arrays = _decode(data, KIND_KEYFRAME_REQUEST)

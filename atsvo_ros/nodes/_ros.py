@@ -10,7 +10,9 @@ keyframe requests reliable keep-last 8.
 """
 from __future__ import annotations
 
+import array
 import importlib
+import os
 import sys
 import threading
 import time
@@ -88,7 +90,6 @@ def stamp_msg(stamp_ns: int) -> Any:
 
 def uint8_array(data: bytes | np.ndarray) -> Any:
     """What an rclpy ``uint8[]`` field takes without a per-byte Python check."""
-    import array
 
     out = array.array("B")
     out.frombytes(data.tobytes() if isinstance(data, np.ndarray) else bytes(data))
@@ -175,7 +176,6 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
     Ctrl-C and external shutdowns end it with 0. A bug in a worker thread (reported through
     ``node.fatal_error``) ends it with 1 after its traceback was logged.
     """
-    import os
     sys.setswitchinterval(float(os.environ.get("ATSVO_SWITCH_S", sys.getswitchinterval())))
     rclpy.init(args=args if args is not None else sys.argv)
     nodes: list[Node] = []

@@ -2,7 +2,7 @@
 
 The two nodes share one executor (``node.executor``: rclpy's C++ events executor by default, or its
 multi-threaded one); the odometry runs in the tracking node's worker thread and the mapper in a
-thread of its own (:class:`~atsvo_ros.core.mapping_port.ThreadedMapping`); every new snapshot is
+thread of its own (:class:`~atsvo_ros.core.mapping.ports.ThreadedMapping`); every new snapshot is
 handed over in memory, both to tracking and to the mapping node, which publishes the map. Same parameters, topics
 and behaviour as ``tracking_node`` + ``mapping_node``, without serialising keyframes.
 
@@ -13,12 +13,11 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from atsvo_ros.nodes._ros import run_nodes
+from atsvo_ros.nodes.mapping_node import MappingNode
+from atsvo_ros.nodes.tracking_node import TrackingNode
 
 
 def _make() -> list[Node]:
-    from atsvo_ros.nodes.mapping_node import MappingNode
-    from atsvo_ros.nodes.tracking_node import TrackingNode
-
     mapping = MappingNode(serve=False)
     return [TrackingNode(mapping="memory", on_snapshot=mapping.publish_snapshot), mapping]
 

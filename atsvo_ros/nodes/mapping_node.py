@@ -3,7 +3,7 @@
 The PTAM split over topics: ``tracking_node`` publishes a keyframe request (std_msgs/UInt8MultiArray
 in the wire format of :mod:`atsvo_ros.io.wire`) whenever the nine-region rule asks for one and keeps
 tracking against its last snapshot; this node inserts the keyframe (one mapper per tracking session,
-:class:`~atsvo_ros.mapping_remote.MappingServer`) and publishes the new snapshot back (reliable,
+:class:`~atsvo_ros.runtime.mapping_remote.MappingServer`) and publishes the new snapshot back (reliable,
 transient local) and the map points in the odom frame as sensor_msgs/PointCloud2 (``topics.map``,
 latched). In ``atsvo_node`` the same node runs without the topics: the mapper is a thread of the
 tracking node and hands the snapshots over in memory (:meth:`MappingNode.publish_snapshot`).
@@ -20,11 +20,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header, UInt8MultiArray
 
-from atsvo_ros.core.map import MapSnapshot
+from atsvo_ros.core.mapping.map import MapSnapshot
 from atsvo_ros.errors import WireError
 from atsvo_ros.io.ros_out import MAP_CLOUD_FIELDS, MAP_CLOUD_POINT_STEP, map_cloud_from_snapshot
 from atsvo_ros.io.wire import uint8_multiarray_cdr, uint8_multiarray_payload
-from atsvo_ros.mapping_remote import MappingServer
 from atsvo_ros.nodes._params import declare_config
 from atsvo_ros.nodes._ros import (
     LATCHED_QOS,
@@ -37,6 +36,7 @@ from atsvo_ros.nodes._ros import (
     run_nodes,
     uint8_array,
 )
+from atsvo_ros.runtime.mapping_remote import MappingServer
 
 
 class MappingNode(Node):

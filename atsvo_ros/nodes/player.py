@@ -25,8 +25,14 @@ from typing import Any
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosbags.highlevel import AnyReader
 
+from atsvo_ros.core.events.batch import EventBatch
+from atsvo_ros.core.geometry import pose_from_tq
 from atsvo_ros.errors import AtsvoError
+from atsvo_ros.io.decode import EventDecoder
+from atsvo_ros.io.encode import serialize_event_packet
+from atsvo_ros.io.msgtypes import register_event_types, typestore
 from atsvo_ros.io.restamp import cdr_stamp_ns, restamp_event_packet, restamp_header
 from atsvo_ros.nodes._ros import LATCHED_QOS, OUTPUT_QOS, RELIABLE_INPUT_QOS, SENSOR_QOS
 
@@ -55,9 +61,7 @@ class BagPlayer:
     def __init__(self, node: Node, bag: str | Path, topics: Iterable[str], rgb_topic: str, depth_topic: str,
                  events_topic: str | None = None, reliable: bool = False) -> None:
         """``reliable``: publish reliable keep-all (like ``ros2 bag play``) instead of sensor-data QoS."""
-        from rosbags.highlevel import AnyReader
 
-        from atsvo_ros.io.msgtypes import register_event_types
 
         self.node = node
         self.rgb_topic, self.depth_topic, self.events_topic = rgb_topic, depth_topic, events_topic
@@ -102,9 +106,6 @@ class BagPlayer:
         played ``rate`` times faster should arrive in packets of ``rate`` ms, not ``rate`` times as many
         1 ms packets. EventPacket streams only (re-encoded in their own encoding).
         """
-        from atsvo_ros.core.events import EventBatch
-        from atsvo_ros.io.decode import EventDecoder
-        from atsvo_ros.io.encode import serialize_event_packet
 
         if self.events_topic is None or not (self._events_msgtype or "").endswith("EventPacket"):
             raise ValueError("re-packetizing needs an EventPacket events topic")
@@ -174,7 +175,6 @@ class BagPlayer:
 
     def _restamper(self) -> Callable[[str, bytes, int], bytes]:
         """``(topic, raw, shift_ns) -> raw`` moved in time, for every topic this player publishes."""
-        from atsvo_ros.io.msgtypes import typestore
 
         encoding = None
         if self.events_topic in self.publishers:
@@ -283,7 +283,6 @@ class OdometryProbe:
 
     def poses(self, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Stamps (ns) and 4x4 ``T_odom_base`` of the odometry received (from index ``since``)."""
-        from atsvo_ros.core.geometry import pose_from_tq
 
         with self._lock:
             msgs = [m for _, m in self.odometry[since:]]

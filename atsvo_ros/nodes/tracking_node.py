@@ -1,7 +1,7 @@
 """ROS 2 tracking node: colour + aligned depth + camera_info + events (+ IMU) in, odometry, status and TF out.
 
 The callbacks only ingest (image conversion, event decoding, pairing by the package's own
-:class:`~atsvo_ros.runtime.OdometryRuntime`, which also cuts the event and IMU streams at frame
+:class:`~atsvo_ros.runtime.runtime.OdometryRuntime`, which also cuts the event and IMU streams at frame
 stamps) and put each complete frame into a bounded drop-oldest queue; a worker thread runs the
 odometry and publishes. Mapping runs either in this process (``atsvo_node``: a mapping thread, the
 snapshot shared in memory) or in ``mapping_node`` (keyframe requests and snapshots over topics, in the
@@ -37,13 +37,13 @@ from sensor_msgs.msg import CameraInfo, Image, Imu
 from std_msgs.msg import Header, UInt8MultiArray
 from std_srvs.srv import Trigger
 
-from atsvo_ros.core.debug_images import render_debug_images
-from atsvo_ros.core.map import MapSnapshot
+from atsvo_ros.core.events.debug_images import render_debug_images
+from atsvo_ros.core.mapping.map import MapSnapshot
+from atsvo_ros.core.mapping.ports import ThreadedMapping
+from atsvo_ros.core.odometry.odometry import Odometry
 from atsvo_ros.errors import WireError
-from atsvo_ros.frame_queue import DropOldestQueue, Worker
 from atsvo_ros.io.ros_out import DEBUG_IMAGE_FRAME, MsgClasses, odometry_msg, transform_msg
 from atsvo_ros.io.wire import uint8_multiarray_cdr, uint8_multiarray_payload
-from atsvo_ros.mapping_remote import RemoteMapping, mapping_digest
 from atsvo_ros.nodes._params import declare_config
 from atsvo_ros.nodes._ros import (
     ERROR,
@@ -65,7 +65,10 @@ from atsvo_ros.nodes._ros import (
     stamp_msg,
     uint8_array,
 )
-from atsvo_ros.runtime import FrameInput, OdometryRuntime, RuntimeOutput
+from atsvo_ros.runtime.frame_queue import DropOldestQueue, Worker
+from atsvo_ros.runtime.mapping_remote import RemoteMapping, mapping_digest
+from atsvo_ros.runtime.runtime import OdometryRuntime
+from atsvo_ros.runtime.types import FrameInput, RuntimeOutput
 
 _CLASSES = MsgClasses(Time, Header, OdometryMsg, PoseWithCovariance, Pose, Point, Quaternion, TwistWithCovariance,
                       Twist, Vector3, TransformStamped, Transform)
@@ -103,8 +106,6 @@ class TrackingNode(Node):
                 use_events = False
 
         def make_core(config, rgb_camera, event_camera=None):
-            from atsvo_ros.core.odometry import Odometry
-
             return Odometry(config, rgb_camera, event_camera, mapping=self._make_mapping_port)
 
         make_core.supports_events = True
@@ -188,8 +189,6 @@ class TrackingNode(Node):
     def _make_mapping_port(self, mapper: Any) -> Any:
         cfg = self.config
         if self._mapping_mode == "memory":
-            from atsvo_ros.core.mapping_port import ThreadedMapping
-
             return ThreadedMapping(mapper, synchronous=cfg.mapping.synchronous, on_snapshot=self._on_snapshot)
         self._port = RemoteMapping(mapper, self._send_request, self._mapping_connected,
                                    synchronous=cfg.mapping.synchronous, timeout_s=cfg.node.mapping_timeout_s,

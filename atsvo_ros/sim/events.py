@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import SimulationError
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from atsvo_ros.errors import SimulationError
+from atsvo_ros.sim.scene import scene_free_xy
 
 SCENARIOS = ("trot", "bound", "pronk", "backflip", "running", "flying")
 GRAVITY = 9.81
@@ -304,8 +305,6 @@ def make_motion(scenario: str, duration_s: float, seed: int,
     of ``make_scene(seed)``, so that ``make_scene(s)`` and ``make_motion(..., s)`` fit together.
     """
     if free_xy is None:
-        from atsvo_ros.sim.scene import scene_free_xy
-
         free_xy = scene_free_xy(seed)
     if scenario not in SCENARIOS:
         raise SimulationError(f"unknown scenario {scenario!r} (choose one of {', '.join(SCENARIOS)})")

@@ -30,7 +30,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig, load_config
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError
@@ -143,11 +143,11 @@ def _scaled(cam: CameraModel, sx: float, sy: float, width: int, height: int) -> 
 def sequence_rig(spec: SequenceSpec) -> SimRig:
     """The rig of a spec: config preset, resized colour camera, scaled event camera, extrinsics."""
     cfg = load_config(spec.config or ("mvsec" if spec.layout == "mvsec" else "synthetic"))
-    rgb = cfg.rgb_camera.model()
+    rgb = CameraModel.from_config(cfg.rgb_camera)
     w = spec.width or (round(rgb.width * spec.height / rgb.height) if spec.height else rgb.width)
     h = spec.height or (round(rgb.height * w / rgb.width) if spec.width else rgb.height)
     rgb = _scaled(rgb, w / rgb.width, h / rgb.height, w, h)
-    ev = cfg.event_camera.model()
+    ev = CameraModel.from_config(cfg.event_camera)
     ew, eh = max(4, round(ev.width * spec.event_scale)), max(4, round(ev.height * spec.event_scale))
     ev = _scaled(ev, ew / ev.width, eh / ev.height, ew, eh)
     depth_cam = rgb  # both layouts: depth on the raw colour grid (D455 aligned depth, MVSEC depth_image_raw)

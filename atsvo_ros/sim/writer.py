@@ -18,9 +18,11 @@ from typing import Any
 import cv2
 import numpy as np
 import yaml
+from rosbags import rosbag1, rosbag2
+from tqdm import tqdm
 
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.geometry import quat_from_rotmat
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError
@@ -153,14 +155,10 @@ class _BagSink:
     def __init__(self, path: Path, fmt: str) -> None:
         self.fmt = fmt
         if fmt == "ros1":
-            from rosbags.rosbag1 import Writer
-
-            self.writer = Writer(path)
+            self.writer = rosbag1.Writer(path)
         else:
-            from rosbags.rosbag2 import StoragePlugin, Writer
-
-            plugin = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
-            self.writer = Writer(path, version=9, storage_plugin=plugin)
+            plugin = rosbag2.StoragePlugin.MCAP if fmt == "mcap" else rosbag2.StoragePlugin.SQLITE3
+            self.writer = rosbag2.Writer(path, version=9, storage_plugin=plugin)
         self.conns: dict[str, Any] = {}
 
     def __enter__(self) -> _BagSink:
@@ -389,7 +387,6 @@ def _progress(duration_s: float, enabled: bool) -> Any:
     """A tqdm bar over simulated seconds (stderr), or a no-op."""
     if not enabled:
         return _NoBar()
-    from tqdm import tqdm
 
     bar = tqdm(total=round(duration_s, 3), unit="sim s", desc="atsvo-sim", leave=False,
                bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} sim s [{elapsed}<{remaining}]")
@@ -408,3 +405,6 @@ def _progress(duration_s: float, enabled: bool) -> Any:
             bar.close()
 
     return _Bar()
+
+
+__all__ = ["BagTopics", "layout_topics", "write_sequence"]

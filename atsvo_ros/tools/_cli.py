@@ -5,7 +5,9 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-from atsvo_ros.errors import AtsvoError
+import yaml
+
+from atsvo_ros.errors import AtsvoError, ConfigError
 
 
 def run(main: Callable[[argparse.Namespace], int | None], parser: argparse.ArgumentParser,
@@ -37,9 +39,7 @@ def add_config_args(parser: argparse.ArgumentParser, default: str | None = None)
 
 def parse_overrides(pairs: Sequence[str]) -> dict[str, object]:
     """``['ats.tau_u_s=0.05']`` -> ``{'ats.tau_u_s': 0.05}`` (values parsed as YAML scalars)."""
-    import yaml
 
-    from atsvo_ros.errors import ConfigError
 
     out: dict[str, object] = {}
     for pair in pairs:

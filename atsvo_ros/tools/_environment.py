@@ -13,6 +13,9 @@ from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
+import cv2  # the wheel may be opencv-python or -contrib instead of -headless
+from numba.core.registry import CPUDispatcher
+
 import atsvo_ros
 
 #: Distributions reported by ``atsvo-info`` (None = not installed).
@@ -30,7 +33,6 @@ def library_versions() -> dict[str, str | None]:
             out[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             out[name] = None
-    import cv2  # the wheel may be opencv-python or -contrib instead of -headless
 
     out["opencv (cv2)"] = cv2.__version__
     return out
@@ -48,7 +50,6 @@ def _modules() -> list[ModuleType]:
 
 def numba_kernels() -> dict[str, Any]:
     """Every numba dispatcher defined in the package, by ``module.function`` name."""
-    from numba.core.registry import CPUDispatcher
 
     out: dict[str, Any] = {}
     for mod in _modules():

@@ -16,8 +16,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from atsvo_ros.config import load_config
 from atsvo_ros.errors import SimulationError
+from atsvo_ros.eval.plots import plot_comparison
+from atsvo_ros.sim.sequence import model_key
 from atsvo_ros.tools._cli import run
+from atsvo_ros.tools.replay import replay
+from atsvo_ros.tools.sim import main as sim_main
 
 DEFAULT_SCENARIO = "backflip"
 DEFAULT_DURATION_S = 3.0
@@ -35,7 +40,6 @@ def cache_dir(override: str | None = None) -> Path:
 def sequence_path(cache: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = ()) -> Path:
     """Where the bag of one (scenario, duration, seed, extra simulator options) lives in the cache; the key
     includes the simulator's model identity, so a changed sensor model never replays an old sequence."""
-    from atsvo_ros.sim.sequence import model_key
 
     extra = "".join(f"_{a.lstrip('-')}" for a in sim_args)
     return cache / f"sim_v{CACHE_VERSION}_{model_key()}_{scenario}_{duration_s:g}s_seed{seed}{extra}"
@@ -44,10 +48,6 @@ def sequence_path(cache: Path, scenario: str, duration_s: float, seed: int, sim_
 def simulate(out: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = (),
              quiet: bool = False) -> None:
     """Write one synthetic sequence as an mcap bag with the simulator's CLI (``atsvo-sim``)."""
-    try:
-        from atsvo_ros.tools.sim import main as sim_main
-    except ImportError as exc:
-        raise SimulationError(f"the simulator (atsvo-sim) is not available in this install: {exc}") from None
     code = sim_main(["--scenario", scenario, "--duration", f"{duration_s:g}", "--seed", str(seed),
                      "--out", str(out), "--format", "mcap", *sim_args, *(["--quiet"] if quiet else [])])
     if code:
@@ -106,8 +106,6 @@ def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAUL
     ``sim_args`` are extra ``atsvo-sim`` options (e.g. ``["--width", "160"]``); they are part of
     the cache key.
     """
-    from atsvo_ros.config import load_config
-    from atsvo_ros.tools.replay import replay
 
     bag = ensure_sequence(cache_dir(cache), scenario, duration_s, seed, regenerate, sim_args,
                           quiet=progress is False)
@@ -120,8 +118,6 @@ def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAUL
         if res.evaluation is not None:
             evaluations[res.mode] = res.evaluation
     if evaluations:
-        from atsvo_ros.eval.plots import plot_comparison
-
         plot_comparison(out / "comparison.png", evaluations,
                         title=f"{scenario}, {duration_s:g} s, seed {seed}: every mode against ground truth")
     return rows

@@ -12,13 +12,13 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
+from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics
+from atsvo_ros.eval.plots import plot_run
+from atsvo_ros.io.trajectory import read_tum
 from atsvo_ros.tools._cli import run
 
 
 def _main(args: argparse.Namespace) -> int:
-    from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics
-    from atsvo_ros.io.trajectory import read_tum
-
     opts = EvalOptions(align=args.align, align_s=args.align_s, max_diff_s=args.t_max_diff, delta_deg=args.delta_deg,
                        interpolate_gt=args.interpolate)
     gt, est = read_tum(args.gt), read_tum(args.est)
@@ -32,8 +32,6 @@ def _main(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
         (out / "metrics.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
         if not args.no_plots:
-            from atsvo_ros.eval.plots import plot_run
-
             plot_run(out, est, result, title=Path(args.est).stem)
         print(f"wrote {out / 'metrics.json'}")
     return 0

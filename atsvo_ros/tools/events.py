@@ -21,8 +21,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from atsvo_ros.config import load_config
+from atsvo_ros.io.event_files import open_events
 from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
+from atsvo_ros.tools.events_render import render_figures
 
 STATS_KEYS = ("width", "height", "encoding", "n_events", "n_on", "n_off", "t_first_ns", "t_last_ns", "duration",
               "rate", "sum_t", "sum_x", "sum_y", "sum_p")
@@ -33,9 +37,7 @@ def event_stats(path: str | Path, topic: str | None = None, progress: bool = Fal
 
     Returns ``(stats, source)``; ``stats`` has exactly :data:`STATS_KEYS`.
     """
-    from tqdm import tqdm
 
-    from atsvo_ros.io.event_files import open_events
 
     src = open_events(path, topic, drop_backwards=False)
     n = n_on = 0
@@ -99,9 +101,6 @@ def _stats(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from atsvo_ros.config import load_config
-    from atsvo_ros.tools.events_render import render_figures
-
     cfg = load_config(args.config, overrides=parse_overrides(args.set))
     written = render_figures(args.path, args.out, cfg, topic=args.topic, bin_s=args.bin, progress=True)
     for p in written:

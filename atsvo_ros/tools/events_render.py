@@ -13,12 +13,14 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from atsvo_ros.config import AtsvoConfig
-from atsvo_ros.core.events import EventBatch
-from atsvo_ros.core.selection.events import EventSelection, select_event_pixels_detailed
-from atsvo_ros.core.time_surface import AdaptiveTimeSurface, ConstantTimeSurface
+from atsvo_ros.core.events.batch import EventBatch
+from atsvo_ros.core.events.selection import EventSelection, select_event_pixels_detailed
+from atsvo_ros.core.events.time_surface import AdaptiveTimeSurface, ConstantTimeSurface
 from atsvo_ros.errors import DecodeError
+from atsvo_ros.io.event_files import open_events
 
 GREEN, RED, YELLOW, WHITE = (0, 220, 0), (0, 0, 255), (0, 200, 255), (255, 255, 255)
 
@@ -35,9 +37,7 @@ class Moment:
 def event_rate_bins(path: str | Path, bin_ns: int, topic: str | None = None,
                     progress: bool = False) -> tuple[int, np.ndarray, tuple[int, int]]:
     """(t0_ns, events per bin, (width, height)) over the whole recording, streaming."""
-    from tqdm import tqdm
 
-    from atsvo_ros.io.event_files import open_events
 
     src = open_events(path, topic)
     counts = np.zeros(0, np.int64)
@@ -72,7 +72,6 @@ def pick_moments(t0_ns: int, counts: np.ndarray, bin_ns: int, min_share: float =
 
 def collect_windows(path: str | Path, windows: list[tuple[int, int]], topic: str | None = None) -> list[EventBatch]:
     """Events of each ``[t_start, t_end]`` window, in one streaming pass."""
-    from atsvo_ros.io.event_files import open_events
 
     src = open_events(path, topic)
     parts: list[list[EventBatch]] = [[] for _ in windows]

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from atsvo_ros.config import flatten, load_config
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.geometry import rotation_angle_rad
 from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
 from atsvo_ros.tools._environment import describe
@@ -25,7 +26,7 @@ def _main(args: argparse.Namespace) -> int:
     print("\n".join(describe()))
     print()
     for name in ("rgb_camera", "event_camera"):
-        cam = getattr(cfg, name).model()
+        cam = CameraModel.from_config(getattr(cfg, name))
         hfov = np.degrees(2 * np.arctan(cam.width / (2 * cam.fx)))
         print(f"{name:13s} {cam.width}x{cam.height}  fx={cam.fx:.2f} fy={cam.fy:.2f} "
               f"cx={cam.cx:.2f} cy={cam.cy:.2f}  {cam.distortion_model}  HFOV {hfov:.1f} deg")

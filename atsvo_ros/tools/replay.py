@@ -5,7 +5,7 @@ directory (sqlite3 / mcap), a bare .mcap / .db3 file, an MVSEC ``*_data.hdf5`` f
 ``*_gt.hdf5`` sibling is read for depth and pose) or a TUM RGB-D folder (rgb.txt, depth.txt,
 groundtruth.txt; :mod:`atsvo_ros.io.tum_rgbd`).
 
-Exactly the core the ROS node runs, through the same :class:`~atsvo_ros.runtime.OdometryRuntime`;
+Exactly the core the ROS node runs, through the same :class:`~atsvo_ros.runtime.runtime.OdometryRuntime`;
 deterministic, streaming (memory does not grow with the bag). Undecodable images, duplicated or
 out-of-order frames are skipped and counted (timing.json ``counters``, and a note each).
 Writes DIR/trajectory.tum (robot base pose, or the colour optical frame with ``--frame
@@ -27,9 +27,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
-from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.config import AtsvoConfig, config_dir, load_config
+from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.errors import BagError, ConfigError, TrackingError
+from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics
+from atsvo_ros.eval.plots import plot_run
+from atsvo_ros.io.record import BagRecorder, check_record_path
+from atsvo_ros.io.sources import detect_preset, open_source
+from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
+from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
 
 TOPIC_FLAGS = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")
@@ -103,19 +111,11 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     checked before the run). Raises :class:`TrackingError` (after writing the outputs) when not a single
     frame could be tracked, saying why.
     """
-    from tqdm import tqdm
 
-    from atsvo_ros.config import load_config
-    from atsvo_ros.core.geometry import se3_inv
-    from atsvo_ros.io.sources import detect_preset, open_source
-    from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
-    from atsvo_ros.runtime import OdometryRuntime
 
     if frame not in (None, "base", "camera"):
         raise ConfigError(f"--frame must be base or camera, got {frame!r}")
     if record is not None:
-        from atsvo_ros.io.record import check_record_path
-
         check_record_path(record, force)  # before the run, not after it
     out = Path(out_dir)
     notes: list[str] = []
@@ -147,8 +147,6 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
             log_lines.append(f"{level}: {text}")
 
         if record is not None:
-            from atsvo_ros.io.record import BagRecorder
-
             recorder = BagRecorder(record, config, force=force).open()
         runtime = OdometryRuntime(config, rgb_cam, ev_cam, use_events=mode == "fused" and source.has("events"),
                                   logger=log, core_factory=odometry_factory, sinks=(recorder,) if recorder else ())
@@ -239,8 +237,6 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {name}")
     eval_result = None
     if gt is not None:
-        from atsvo_ros.eval.metrics import EvalOptions, evaluate
-
         ok = np.array([s == "ok" for s in statuses])
         opts = eval_options or EvalOptions(interpolate_gt=True)
         eval_result = evaluate(gt, est, opts, est_ok=ok)
@@ -248,8 +244,6 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         result.evaluation = eval_result
         (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2) + "\n")
     if plots:
-        from atsvo_ros.eval.plots import plot_run
-
         plot_run(out, est, eval_result, title=f"{name} ({used_mode})")
     if not any(r.status.tracked for r in results):
         reasons = Counter(r.reason for r in results if r.reason)
@@ -261,7 +255,6 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
 
 def _ground_truth(gt_file: Any, gt_samples: list | None) -> Any:
     """The ground truth: the ``--gt`` file, else the bag's pose samples (a Trajectory), else None."""
-    from atsvo_ros.io.trajectory import Trajectory
 
     if gt_file is not None:
         return gt_file
@@ -284,9 +277,6 @@ def _counter_notes(runtime: Any) -> list[str]:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from atsvo_ros.config import load_config
-    from atsvo_ros.eval.metrics import EvalOptions, format_metrics
-
     overrides = parse_overrides(args.set)
     config = None
     if args.config or args.preset or overrides:
@@ -307,8 +297,6 @@ def _main(args: argparse.Namespace) -> int:
         print(format_metrics(res.metrics))
     print(f"wrote {Path(args.out) / 'trajectory.tum'}")
     if res.record_path is not None:
-        from atsvo_ros.config import config_dir
-
         print(f"wrote {res.record_path} ({sum(res.record_counts.values())} messages on {len(res.record_counts)} "
               f"topics; Foxglove layout: {config_dir() / 'foxglove_layout.json'})")
     return 0

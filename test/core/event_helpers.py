@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from test.core.render_helpers import BoxRoom
 
 

@@ -12,11 +12,11 @@ from atsvo_ros.errors import CalibrationError
 
 
 def dvxlite() -> CameraModel:
-    return load_config("mini_cheetah").event_camera.model()
+    return CameraModel.from_config(load_config("mini_cheetah").event_camera)
 
 
 def mvsec() -> CameraModel:
-    return load_config("mvsec").event_camera.model()
+    return CameraModel.from_config(load_config("mvsec").event_camera)
 
 
 def pixel_grid(cam: CameraModel, step: float = 1.0) -> np.ndarray:

@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.geometry import se3_inv, se3_log
 from atsvo_ros.errors import EvaluationError
 from atsvo_ros.eval.peers import OPEN3D_METHODS, import_open3d, undistorted_frames
 from test.core.render_helpers import BoxRoom
 from test.io.tum_helpers import render_frames
 
-FR1 = load_config("tum_fr1").rgb_camera.model()
+FR1 = CameraModel.from_config(load_config("tum_fr1").rgb_camera)
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.geometry import pose_from_tq, se3_exp
 from atsvo_ros.errors import BagError
 from atsvo_ros.io.bags import Bag, StaticTf, pose_from_msg, resolve_topics

@@ -13,7 +13,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.io.decode import EventDecoder, decode_raw
 from atsvo_ros.io.decode._kernels import _keep_forward
 from atsvo_ros.io.encode import serialize_dvs_event_array, serialize_event_packet

@@ -12,7 +12,7 @@ import struct
 import numpy as np
 import pytest
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import DecodeError
 from atsvo_ros.io.decode import EventDecoder, decode_raw
 from atsvo_ros.io.encode import encode_events, serialize_event_packet

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import DecodeError
 from atsvo_ros.io.decode import EventDecoder, decode_message, decode_raw
 from atsvo_ros.io.decode.packet import decode_packet

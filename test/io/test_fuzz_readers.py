@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import AtsvoError, DecodeError
 from atsvo_ros.io.decode import EventDecoder, decode_raw
 from atsvo_ros.io.decode import _kernels as kern

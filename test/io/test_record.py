@@ -14,7 +14,7 @@ from atsvo_ros.errors import RecordError
 from atsvo_ros.io.record import GT_ODOMETRY_TOPIC, GT_PATH_TOPIC, PATH_TOPIC, BagRecorder, check_record_path
 from atsvo_ros.io.ros_out import pose_from_transform_msg, time_to_ns
 from atsvo_ros.io.trajectory import Trajectory
-from atsvo_ros.runtime import RuntimeOutput
+from atsvo_ros.runtime.types import RuntimeOutput
 
 T0 = 1_700_000_000_000_000_000
 MS = 1_000_000

@@ -57,7 +57,7 @@ def test_body_twist_of_a_known_motion():
 
 
 def test_map_cloud_of_a_snapshot_is_in_odom_and_coloured_by_the_patch_centre():
-    from atsvo_ros.core.map import MapSnapshot
+    from atsvo_ros.core.mapping.map import MapSnapshot
     from atsvo_ros.io.ros_out import MAP_CLOUD_FIELDS, MAP_CLOUD_POINT_STEP, map_cloud_from_snapshot
 
     points_w = np.array([[0.0, 0.0, 1.0], [0.5, -0.2, 2.0], [-1.0, 0.3, 3.5]])

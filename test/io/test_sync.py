@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from atsvo_ros.config import RigConfig
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.io.sync import FrameAssembler
 
 MS = 1_000_000

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.errors import ConfigError, DatasetError, ImageError, TrajectoryError
 from atsvo_ros.io.sync import FrameAssembler
 from atsvo_ros.io.tum_rgbd import (
@@ -58,7 +59,7 @@ def test_association_is_associate_py_one_to_one_closest_first():
 def test_presets_carry_tums_published_calibration(preset, k, d):
     """Full-precision values in the YAMLs; TUM's calibration table prints them rounded to 4 digits."""
     cfg = load_config(preset)
-    cam = cfg.rgb_camera.model()
+    cam = CameraModel.from_config(cfg.rgb_camera)
     assert (cam.width, cam.height) == (640, 480) and not cfg.rgb_camera.use_camera_info
     assert np.allclose([cam.fx, cam.fy, cam.cx, cam.cy], k, atol=0.05)
     assert np.allclose(cam.D, d, atol=5e-5) and cam.distortion_model == ("plumb_bob" if d else "none")
@@ -70,7 +71,7 @@ def test_presets_carry_tums_published_calibration(preset, k, d):
 @pytest.fixture(scope="module")
 def synth(tmp_path_factory):
     """A rendered fr1-like sequence (raw, distorted images) written as a TUM folder named like TUM's."""
-    cam = load_config("tum_fr1").rgb_camera.model()
+    cam = CameraModel.from_config(load_config("tum_fr1").rgb_camera)
     frames = render_frames(cam, n=8)
     folder = write_tum_folder(tmp_path_factory.mktemp("tum") / "rgbd_dataset_freiburg1_synth", frames)
     return folder, frames
@@ -111,7 +112,7 @@ def test_reader_pairs_streams_and_scales_depth(synth):
 
 
 def test_zero_depth_stays_invalid(tmp_path):
-    frames = render_frames(load_config("tum_fr3").rgb_camera.model(), n=1)
+    frames = render_frames(CameraModel.from_config(load_config("tum_fr3").rgb_camera), n=1)
     frames[0][2][:40] = 0.0
     folder = write_tum_folder(tmp_path / "fr3_holes", frames, gt=False)
     cfg = load_config("tum_fr3")

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
-from atsvo_ros.core.map import MapSnapshot
-from atsvo_ros.core.mapper import KeyframeRequest, Mapper
-from atsvo_ros.core.mapping_port import InlineMapping
-from atsvo_ros.core.odometry import Odometry, RgbdFrame
-from atsvo_ros.core.residuals import RollingShutter
+from atsvo_ros.core.mapping.map import MapSnapshot
+from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
+from atsvo_ros.core.mapping.ports import InlineMapping
+from atsvo_ros.core.odometry.odometry import Odometry, RgbdFrame
+from atsvo_ros.core.rolling_shutter import RollingShutter
 from atsvo_ros.errors import WireError
 from atsvo_ros.io.wire import (
     PinholeLevels,

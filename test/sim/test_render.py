@@ -57,7 +57,7 @@ def test_every_pixel_of_a_distorted_camera_lands_on_a_surface():
     """Back-projecting the rendered depth through the camera model gives points on the geometry."""
     scene = make_scene(2, texture_size=32)
     cfg = load_config("synthetic")
-    cam = cfg.event_camera.model()  # plumb_bob: rays are cast through the raw pixels
+    cam = CameraModel.from_config(cfg.event_camera)  # plumb_bob: rays are cast through the raw pixels
     x0, x1, y0, y1 = scene.free_xy
     T_world_base = _pose(np.eye(3), (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.35))
     for yaw in (0.0, 2.0, 4.0):

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.geometry import interpolate_trajectory, se3_inv
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError

@@ -11,7 +11,7 @@ from rosbags.highlevel import AnyReader
 
 from atsvo_ros.config import load_config
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.geometry import pose_from_tq
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError

@@ -31,7 +31,7 @@ def fake_world(monkeypatch):
         return real_replay(*args, **kwargs)
 
     monkeypatch.setattr(demo_mod, "simulate", fake_simulate)
-    monkeypatch.setattr(replay_mod, "replay", replay_with_double)
+    monkeypatch.setattr(demo_mod, "replay", replay_with_double)
     return calls
 
 

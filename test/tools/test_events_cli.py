@@ -9,7 +9,7 @@ import pytest
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import Writer as Writer2
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.io.encode import serialize_dvs_event_array, serialize_event_packet
 from atsvo_ros.io.msgtypes import typestore
 from atsvo_ros.tools.events import STATS_KEYS, main
@@ -120,16 +120,3 @@ def test_render_picks_slow_and_fast_moments(tmp_path, capsys):
     t0, counts, _ = event_rate_bins(path, 20_000_000)
     slow_m, fast_m = pick_moments(t0, counts, 20_000_000)
     assert slow_m.t_ns <= T0 + 300_000_000 < fast_m.t_ns
-
-
-def test_bench_front_end_and_decode_part_run():
-    """Smoke test of ``atsvo-bench events`` (no timing asserted: benchmarks are not tests)."""
-    from atsvo_ros.tools.bench import SUBCOMMANDS, build_parser
-    from atsvo_ros.tools.bench_events import bench_decode
-
-    assert "events" in SUBCOMMANDS
-    args = build_parser().parse_args(["events", "--events", "1000", "--repeats", "1"])
-    assert args.events == 1000 and args._target[1] == "main_events"
-    rows = bench_decode(3000, 1000, 1)
-    assert {r["encoding"] for r in rows} >= {"libcaer_cmp", "libcaer", "mono", "evt3"}
-    assert all(r["ours_eps"] > 0 and r["rosbags_eps"] > 0 for r in rows)

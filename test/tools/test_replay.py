@@ -22,7 +22,7 @@ T0 = 1_700_000_000_000_000_000
 
 
 class FakeOdometry:
-    """Test double of atsvo_ros.core.odometry.Odometry: reports the known motion of write_bag."""
+    """Test double of atsvo_ros.core.odometry.odometry.Odometry: reports the known motion of write_bag."""
 
     instances: list = []
 

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import DecodeError
 from atsvo_ros.io.decode import _kernels as kern
 from atsvo_ros.io.decode import _msg_kernels as mkern

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from atsvo_ros.core.events import EventBatch
+from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import DecodeError
 from atsvo_ros.io.decode.packet import Evt3State, decode_evt3
 

@@ -1,0 +1,155 @@
+"""Mapping (the PTAM split): keyframe insertion, culling and the snapshots tracking reads.
+
+Tracking decides *when* a keyframe is needed (the nine-region rule against the reference health
+the snapshot carries) and sends a :class:`KeyframeRequest`; the mapper owns the point map, selects
+and back-projects new points where the tracked ones leave gaps, culls what tracking reported as
+repeated outliers and what fell out of the keyframe window, and returns a new immutable
+:class:`~atsvo_ros.core.mapping.map.MapSnapshot`. Nothing here reads tracking state directly, so the
+mapper can run in the tracking thread (the replay), in a thread of its own or in another process.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.events.event_map import TemporaryEventMap, build_event_map
+from atsvo_ros.core.events.frontend import EventFrame, select_event_frame
+from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.core.image.frontend import PreparedFrame
+from atsvo_ros.core.image.photometric import RGB_PATTERN, extract_patches
+from atsvo_ros.core.mapping.depth_selection import select_depth_pixels
+from atsvo_ros.core.mapping.keyframes import assess_health
+from atsvo_ros.core.mapping.map import (
+    MapSnapshot,
+    PointMap,
+    smoothed_depth,
+    valid_depth_mask,
+)
+from atsvo_ros.core.mapping.rgb_selection import select_rgb_pixels
+from atsvo_ros.core.rolling_shutter import RollingShutter
+from atsvo_ros.errors import TrackingError
+
+
+@dataclass(frozen=True)
+class KeyframeRequest:
+    """What tracking hands to mapping for one keyframe.
+
+    ``outlier_runs`` counts, per photometric point of snapshot ``snapshot_id``, the consecutive
+    frames in which it was an outlier; ``tracked_uv`` are the inlier points' pixels in this frame
+    (new points fill the gaps between them). ``reset`` starts a new map from this frame.
+    ``rolling_shutter`` (with the frame's velocity) places points seen at other times than the stamp.
+    ``geometry_only``: add depth points only (a coasting frame: its colour image did not hold the pose).
+    """
+
+    snapshot_id: int
+    frame: PreparedFrame
+    T_c_w: np.ndarray
+    affine: tuple[float, float]
+    tracked_uv: np.ndarray
+    outlier_runs: np.ndarray
+    reset: bool = False
+    rolling_shutter: RollingShutter | None = None
+    geometry_only: bool = False
+
+
+@dataclass(frozen=True)
+class EventMapRequest:
+    """What tracking hands to mapping to build the temporary event map: one frame's surface and depth.
+
+    ``fired`` (bool image on the surface's grid) are the pixels of the selection window's events: with
+    it mapping runs the event pixel selection (Section II-B) itself, so the whole build can happen
+    beside tracking; without it ``event_frame.selected`` is used as it is.
+    """
+
+    event_frame: EventFrame
+    depth_m: np.ndarray  # the colour-aligned depth of the same frame, on the colour camera's pinhole grid
+    T_c_w: np.ndarray  # the colour camera's pose of that frame
+    fired: np.ndarray | None = None
+
+
+class Mapper:
+    """Owns the map; turns keyframe requests into snapshots (and event-map requests into event maps)."""
+
+    def __init__(self, config: AtsvoConfig, cameras: list[CameraModel], event_camera: CameraModel | None = None
+                 ) -> None:
+        self.config = config
+        self.event_camera = event_camera
+        self.T_rgb_event = config.rig.T_rgb_event_matrix()
+        self.camera = cameras[0]
+        self.n_levels = len(cameras)
+        self._map = PointMap(self.n_levels, len(RGB_PATTERN))
+        self._snapshot_id = 0
+        self.snapshot = MapSnapshot.empty(self.n_levels, len(RGB_PATTERN))
+        #: Keyframes inserted since construction (re-initialisations included).
+        self.n_keyframes = 0
+
+    def insert(self, req: KeyframeRequest) -> MapSnapshot:
+        """Insert one keyframe (or start a new map); returns (and keeps) the new snapshot.
+
+        When the frame adds no point (no valid depth where the map has gaps), the snapshot is still
+        renewed with the current health as reference, so the rule does not fire on every frame.
+        """
+        mapping, sel = self.config.mapping, self.config.rgb_selection
+        if req.reset:
+            self._map = PointMap(self.n_levels, len(RGB_PATTERN))
+        elif req.snapshot_id == self.snapshot.snapshot_id and len(req.outlier_runs) == len(self._map):
+            self._map.remove_points(req.outlier_runs >= mapping.max_outlier_frames)
+        frame = req.frame
+        grey = frame.grey
+        ok = valid_depth_mask(frame.depth_m, self.config.rig, mapping.depth_edge_ratio,
+                              max(3, mapping.depth_window_px))
+        uv = np.zeros((0, 2), np.int64) if req.geometry_only else select_rgb_pixels(grey, sel, mask=ok)
+        tracked_uv = np.asarray(req.tracked_uv, dtype=np.float64).reshape(-1, 2)
+        if len(uv) and len(tracked_uv):
+            uv = uv[~self._covered(uv, tracked_uv, grey.shape)]
+        geo_uv = select_depth_pixels(ok, mapping.depth_points)
+        added = 0
+        if len(uv) or ((req.reset or req.geometry_only) and len(geo_uv)):
+            zs = smoothed_depth(frame.depth_m, ok, mapping.depth_window_px)
+            affine = (0.0, 0.0) if req.reset else req.affine
+            p_c = self.camera.backproject(uv.astype(np.float64), zs[uv[:, 1], uv[:, 0]].astype(np.float64))
+            geo_c = self.camera.backproject(geo_uv.astype(np.float64),
+                                            zs[geo_uv[:, 1], geo_uv[:, 0]].astype(np.float64))
+            if req.rolling_shutter is not None:
+                p_c = req.rolling_shutter.to_stamp(p_c, uv[:, 1], req.T_c_w)
+                geo_c = req.rolling_shutter.to_stamp(geo_c, geo_uv[:, 1], req.T_c_w)
+            patches = extract_patches(frame.pyramid, uv, RGB_PATTERN, affine)
+            self._map.add_keyframe(frame.stamp_ns, se3_inv(req.T_c_w), affine, p_c, patches, geo_c)
+            self._map.cull(mapping.max_keyframes, mapping.max_points)
+            self.n_keyframes += 1
+            added = len(uv)
+        all_uv = np.concatenate([tracked_uv, uv.astype(np.float64)]) if added else tracked_uv
+        ref = assess_health(all_uv, self.camera.width, self.camera.height, 1, mapping)
+        self._snapshot_id += 1
+        self.snapshot = self._map.snapshot(self._snapshot_id, max(1, ref.n_tracked), ref.healthy_regions)
+        return self.snapshot
+
+    def build_event_map(self, req: EventMapRequest) -> TemporaryEventMap:
+        """The temporary event map of Eq. 4 from one frame (:func:`atsvo_ros.core.events.event_map.build_event_map`)."""
+        if self.event_camera is None:
+            raise TrackingError("the mapper has no event camera: it cannot build an event map")
+        t0 = time.perf_counter()
+        frame = req.event_frame
+        if req.fired is not None:
+            frame = select_event_frame(frame, req.fired, self.config.event_selection)
+        event_map = build_event_map(frame, req.depth_m, self.camera, self.event_camera, se3_inv(req.T_c_w),
+                                    self.T_rgb_event)
+        return dataclasses.replace(event_map, build_time_s=time.perf_counter() - t0)
+
+    def _covered(self, uv: np.ndarray, tracked_uv: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """Candidates in a cell (of the size that spreads the target count) that a tracked point occupies."""
+        h, w = shape
+        cell = max(2, int(np.sqrt(h * w / max(1, self.config.rgb_selection.target_points))))
+        occ = np.zeros((h // cell + 1, w // cell + 1), dtype=bool)
+        t = np.round(tracked_uv).astype(np.int64)
+        inside = (t[:, 0] >= 0) & (t[:, 0] < w) & (t[:, 1] >= 0) & (t[:, 1] < h)
+        occ[t[inside, 1] // cell, t[inside, 0] // cell] = True
+        return occ[uv[:, 1] // cell, uv[:, 0] // cell]
+
+
+__all__ = ["EventMapRequest", "KeyframeRequest", "Mapper"]

@@ -1,0 +1,73 @@
+"""The odometry's IMU buffer: the last seconds of gyro samples, and the rotation they measure between two frames."""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from atsvo_ros.core.geometry import so3_log
+from atsvo_ros.core.imu import ImuBatch, gyro_rotation
+from atsvo_ros.errors import ImuError
+
+
+class GyroBuffer:
+    """IMU batches in time order, kept for :data:`BUFFER_NS`, integrated between two frame stamps.
+
+    Args:
+        R_rgb_imu: rotation of the IMU frame in the colour optical frame.
+    """
+
+    #: IMU kept for the gyro prediction: long enough to carry the rotation across a camera dropout of a few
+    #: seconds (~1,200 samples at 400 Hz), when the constant-motion model knows nothing any more
+    BUFFER_NS = 3_000_000_000
+
+    def __init__(self, R_rgb_imu: np.ndarray) -> None:
+        self.R_rgb_imu = R_rgb_imu
+        self._batches: deque[ImuBatch] = deque()
+
+    def __bool__(self) -> bool:
+        """Whether any samples are buffered."""
+        return bool(self._batches)
+
+    def add(self, batch: ImuBatch) -> None:
+        """Buffer a time-ordered batch (empty ones are ignored) and drop the batches older than :data:`BUFFER_NS`."""
+        if len(batch) == 0:
+            return
+        self._batches.append(batch)
+        newest = batch.t_last_ns
+        while self._batches and self._batches[0].t_last_ns < newest - self.BUFFER_NS:
+            self._batches.popleft()
+
+    def rotation(self, t0_ns: int, t1_ns: int) -> np.ndarray | None:
+        """``R_i0_i1``: the IMU's rotation from ``t0_ns`` to ``t1_ns``.
+
+        Returns:
+            The 3x3 rotation, or None when no samples are buffered or they do not cover the interval.
+        """
+        if not self._batches:
+            return None
+        try:
+            return gyro_rotation(ImuBatch.concatenate(list(self._batches)), t0_ns, t1_ns)
+        except ImuError:
+            return None
+
+    def camera_rotation(self, t0_ns: int, t1_ns: int) -> np.ndarray | None:
+        """``R_c0_c1``: the colour camera's rotation from ``t0_ns`` to ``t1_ns`` (None as :meth:`rotation`).
+
+        Gyro integration over one frame is accurate to a small fraction of a degree even in a backflip
+        (turn-on bias ~1 deg/s adds ~0.03 deg per frame), far inside the photometric basin.
+        """
+        R_i0_i1 = self.rotation(t0_ns, t1_ns)
+        if R_i0_i1 is None:
+            return None
+        return self.R_rgb_imu @ R_i0_i1 @ self.R_rgb_imu.T
+
+    def angular_rate(self, t0_ns: int, t1_ns: int) -> float | None:
+        """Mean angular rate (rad/s) from ``t0_ns`` to ``t1_ns`` (None as :meth:`rotation`)."""
+        R = self.rotation(t0_ns, t1_ns)
+        if R is None:
+            return None
+        return float(np.linalg.norm(so3_log(R))) / max((t1_ns - t0_ns) * 1e-9, 1e-9)
+
+
+__all__ = ["GyroBuffer"]

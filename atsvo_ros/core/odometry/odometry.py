@@ -1,0 +1,340 @@
+"""The odometry facade: RGB-D frames (events, IMU samples) in, ``odom -> base`` poses out.
+
+Composes the PTAM split of Fig. 2 in one thread: the colour camera's front end, the motion model,
+:class:`~atsvo_ros.core.tracking.tracking.Tracking` against the latest map snapshot and the
+:class:`~atsvo_ros.core.mapping.mapper.Mapper`, which inserts a keyframe whenever tracking asks for one and
+hands back a new snapshot before the next frame (what the replay does; the nodes can run the
+mapper elsewhere and pass snapshots back).
+
+Frames: the internal world frame is the colour optical frame of the first frame; the published
+``odom`` frame is the base frame at the first frame (REP 105: odom starts where the robot is), so
+``T_odom_base`` of the first frame is the identity and ``T_odom_world = T_base_rgb``.
+
+Per frame: predictions (constant motion, zero motion, the gyro's rotation when an IMU is fed, and
+rotated hypotheses when configured) -> tracking -> checks. A frame the checks reject is tracked
+again from the poses of the recent keyframes (relocalisation); only if that fails too is a new map
+started at the predicted pose (re-initialisation). Clock jumps (a stamp not after the previous one,
+or a gap over :attr:`Odometry.MAX_GAP_S`) reset the motion model instead of stopping the odometry.
+
+The parts live beside this module: the predictions in :mod:`~atsvo_ros.core.odometry.prediction` (with
+the IMU buffer of :mod:`~atsvo_ros.core.odometry.gyro`), the event camera's state between frames in
+:mod:`~atsvo_ros.core.odometry.event_side`, the frame clock and the published stamp in
+:mod:`~atsvo_ros.core.odometry.timing`, the published result in :mod:`~atsvo_ros.core.odometry.output`.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.events.batch import EventBatch
+from atsvo_ros.core.events.frontend import EventFrame, EventFrontEnd
+from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
+from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.core.image.frontend import PreparedFrame, RgbdFrontEnd
+from atsvo_ros.core.imu import ImuBatch
+from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
+from atsvo_ros.core.mapping.ports import InlineMapping, MappingPort
+from atsvo_ros.core.odometry.event_side import EventSide
+from atsvo_ros.core.odometry.gyro import GyroBuffer
+from atsvo_ros.core.odometry.output import ResultBuilder
+from atsvo_ros.core.odometry.prediction import Predictor
+from atsvo_ros.core.odometry.timing import FrameTiming
+from atsvo_ros.core.rolling_shutter import RollingShutter
+from atsvo_ros.core.tracking.checks import DEGRADED, OK, Priors
+from atsvo_ros.core.tracking.motion import MotionModel
+from atsvo_ros.core.tracking.tracking import Tracking, TrackingOutcome, rotation_hypotheses
+
+
+def _best_attempt(attempts: list[tuple[TrackingOutcome, bool, TrackingStatus]]
+                  ) -> tuple[TrackingOutcome, bool, TrackingStatus] | None:
+    """The first trusted attempt; else the degraded one whose patches match best; None if every one is lost."""
+    for a in attempts:
+        if a[0].verdict.level == OK:
+            return a
+    degraded = [(a[0], a[1], TrackingStatus.DEGRADED) for a in attempts if a[0].verdict.level == DEGRADED]
+    if not degraded:
+        return None
+    return max(degraded, key=lambda a: -1.0 if np.isnan(a[0].zncc) else a[0].zncc)
+
+
+class Odometry:
+    """Direct RGB-D (+ event) odometry: Eq. 4 with the RGB, depth and, during fast motion, ATS terms."""
+
+    #: A gap between frames longer than this resets the motion model (constant motion is meaningless).
+    MAX_GAP_S = 1.0
+
+    def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel, event_camera: CameraModel | None = None,
+                 mapping: Callable[[Mapper], MappingPort] | None = None) -> None:
+        """``mapping`` wraps the mapper into the port tracking talks to (default: :class:`InlineMapping`)."""
+        self.config = config
+        self.raw_camera = rgb_camera
+        self.frontend = RgbdFrontEnd(rgb_camera, config.tracker.pyramid_levels, config.rig.depth_min_m,
+                                     config.rig.depth_max_m, config.mapping.depth_edge_ratio)
+        self.camera = self.frontend.camera
+        self.cameras = self.frontend.cameras
+        self.n_levels = self.frontend.n_levels
+        self.event_camera = event_camera
+        self.T_base_rgb = config.rig.T_base_rgb_matrix()
+        self.T_rgb_base = se3_inv(self.T_base_rgb)
+        self.R_rgb_imu = config.rig.T_rgb_imu_matrix()[:3, :3]
+        self.motion = MotionModel()
+        self.events: EventFrontEnd | None = None
+        event_cams = None
+        if event_camera is not None and config.mode == "fused":
+            self.events = EventFrontEnd(event_camera, config, config.tracker.pyramid_levels)
+            event_cams = self.events.cameras
+        T_event_rgb = se3_inv(config.rig.T_rgb_event_matrix())
+        self.tracking = Tracking(config, self.cameras, event_cams, T_event_rgb)
+        self.mapper = Mapper(config, self.cameras, None if self.events is None else self.events.camera)
+        self.mapping: MappingPort = (mapping or InlineMapping)(self.mapper)
+        #: The event front end's state between frames: event counts, the previous surface for the event map.
+        self.event_side = EventSide(config, self.events, self.mapping)
+        #: The IMU samples of the last seconds (the gyro's rotation between frames).
+        self.gyro = GyroBuffer(self.R_rgb_imu)
+        self.predictor = Predictor(config, self.motion, self.gyro, self.camera.height)
+        self.timing = FrameTiming(config.rgb_camera.time_offset_s, config.rgb_camera.frame_clock_frames)
+        self._results = ResultBuilder(config, self.T_base_rgb, self.T_rgb_base)
+        self._affine = (0.0, 0.0)
+        # the newest keyframe was taken while the camera turned fast: its colour patches are motion-blurred
+        self._blurred_keyframe = False
+        self._coast_start_ns: int | None = None  # first frame of the current run of coasting frames
+        #: Why the last frame was not ``ok`` (None when it was): for logs and diagnostics.
+        self.last_loss_reason: str | None = None
+
+    @property
+    def n_keyframes(self) -> int:
+        """Keyframes inserted since construction (re-initialisations included)."""
+        return self.mapping.n_keyframes
+
+    @property
+    def map(self):
+        """The snapshot tracking currently reads."""
+        return self.tracking.snapshot
+
+    def close(self) -> None:
+        """Stop the mapping worker, if any (the inline mapping has none)."""
+        self.mapping.close()
+
+    def motion_rates(self) -> tuple[float, float] | None:
+        """The paper's relative-motion factor: camera angular rate (rad/s) and speed (m/s) over the last two frames.
+
+        The angular rate comes from the gyro when it covers the interval (measured, not estimated), else
+        from the two poses; None before two frames.
+        """
+        return self.predictor.motion_rates()
+
+    # ------------------------------------------------------------------ inputs
+    def add_events(self, batch: EventBatch) -> None:
+        """Fold a time-ordered event batch into the time surface (ignored without an event camera)."""
+        self.event_side.add(batch)
+
+    def add_imu(self, batch: ImuBatch) -> None:
+        """Buffer IMU samples (time order; the last 3 s are kept): their gyro predicts each frame's rotation."""
+        self.gyro.add(batch)
+
+    # ------------------------------------------------------------------ main entry
+    def process_frame(self, frame: RgbdFrame) -> OdometryResult:
+        """Track one frame, insert a keyframe when needed, return the pose estimate."""
+        # the event surface's updates since the last frame count towards this frame's tracking time
+        event_time_s, n_events = self.event_side.start_frame()
+        t0 = time.perf_counter() - event_time_s
+        # internally a frame lives at its exposure time off the frame clock (see FrameTiming)
+        stamp = self.timing.exposure(frame.stamp_ns)
+        prepared = self.frontend.prepare(frame)
+        newer = self.mapping.latest()  # a keyframe mapping finished meanwhile (threaded or remote mapping)
+        if newer is not None:
+            self.tracking.set_snapshot(newer)
+        note = self.timing.check(stamp, self.MAX_GAP_S)
+        if note is not None:
+            self.motion.reset()
+        predicted = self.motion.predict(stamp)
+        ev_frame = self.event_side.render(stamp, n_events)  # None while the event camera is silent
+        if not self.tracking.has_map:
+            self.event_side.end_frame(n_events)
+            return self._initialise(prepared, stamp, predicted, t0, note, ev_frame)
+        gyro = self.predictor.gyro_pose(stamp)
+        fast = self.predictor.is_fast()
+        guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())
+        last = self.motion.last[1] if self.motion.last else predicted
+        rs = self.predictor.rolling_shutter(stamp)
+        priors = self.predictor.priors(stamp, gyro)
+        # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
+        self.tracking.set_event_map(self.event_side.event_map() if fast else None)
+        fused = self.tracking.uses_events(ev_frame)
+        out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
+        status = TrackingStatus.OK
+        if out.verdict.level != OK and self.mapping.busy():
+            # The camera outran the map while mapping still inserts a keyframe (asynchronous mapping behind):
+            # wait for that keyframe rather than relocalise against a map the camera has left.
+            newer = self.mapping.await_pending()
+            if newer is not None:
+                self.tracking.set_snapshot(newer)
+                out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
+        if out.verdict.level != OK:
+            # Not trusted: try harder before accepting a degraded pose or starting a new map.
+            attempts = [(out, fused, TrackingStatus.DEGRADED)]
+            if not fused and self.event_side.has_previous:
+                # RGB-D alone could not hold the pose (a sudden push-off): the events saw the motion
+                self.tracking.set_event_map(self.event_side.event_map())
+                if self.tracking.uses_events(ev_frame):
+                    retry = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
+                    attempts.append((retry, True, TrackingStatus.DEGRADED))
+            if all(a[0].verdict.level != OK for a in attempts):
+                reloc = self._relocalise(prepared, guesses[0], last, rs, priors, ev_frame)
+                attempts.append((reloc, self.tracking.uses_events(ev_frame), TrackingStatus.RELOCALISED))
+            best = _best_attempt(attempts)
+            if best is None:
+                self.last_loss_reason = out.verdict.reason
+                self.event_side.end_frame(n_events)
+                return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame)
+            out, fused, status = best
+        if not self.tracking.colour_usable(prepared) and status is not TrackingStatus.DEGRADED:
+            # one sensor is blind: the pose rests on depth (and events) alone, and the map is left as it is
+            status = TrackingStatus.DEGRADED
+            blind = (f"colour image without contrast (grey standard deviation {prepared.contrast:.1f}: "
+                     "lens covered, dark or saturated?): tracked on depth alone")
+            note = f"{note}; {blind}" if note else blind
+        t_track = time.perf_counter() - t0
+        self.last_loss_reason = out.verdict.reason or note
+        kf = False
+        if status is not TrackingStatus.DEGRADED:
+            self._affine = out.affine
+            # Keyframes taken mid-flip hold blurred colour patches; the first trusted frame after the turn slows
+            # replaces them, or tracking goes on against blur (measured: 1-2 cm of jitter per frame after a landing)
+            refresh = self._blurred_keyframe and not fast and status is TrackingStatus.OK
+            if out.health is not None and (out.health.needs_keyframe or refresh):
+                kf = self._insert(self.tracking.keyframe_request(prepared, out, rs))
+                if kf:
+                    self._blurred_keyframe = fast
+        coasts = self._coasts(out, stamp)
+        if coasts:
+            # Depth is blur-free: its points keep the depth term in view for the next coasting frames, where a
+            # re-initialisation would start a new map from the same predicted pose and drop the old one.
+            kf = self._insert(self.tracking.keyframe_request(prepared, out, rs, geometry_only=True))
+            self._blurred_keyframe = kf or self._blurred_keyframe
+        self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
+        if ev_frame is not None:
+            self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
+        self.event_side.end_frame(n_events)
+        return self._result(stamp, out.T_c_w, out, status, t_track, kf, fused)
+
+    def _coasts(self, out: TrackingOutcome, stamp: int) -> bool:
+        """Whether a degraded frame held by depth and the motion prior alone keeps the motion trusted.
+
+        Its pose follows the prediction where the data is silent, so the prediction (and the prior) go on
+        into the next frame, for at most ``tracker.max_coast_s`` in a row.
+        """
+        if not out.verdict.coasting:
+            self._coast_start_ns = None
+            return False
+        if self._coast_start_ns is None:
+            self._coast_start_ns = stamp
+        return (stamp - self._coast_start_ns) * 1e-9 < self.config.tracker.max_coast_s
+
+    # ------------------------------------------------------------------ steps
+    def _relocalise(self, prepared: PreparedFrame, predicted: np.ndarray, last: np.ndarray,
+                    rs: RollingShutter | None, priors: Priors,
+                    ev_frame: EventFrame | None) -> TrackingOutcome:
+        """Track again from wider starting points: the recent keyframes' poses and doubled rotation hypotheses
+        (``tracker.relocalisation_rings`` of them when the last motion is not trusted)."""
+        cfg = self.config.tracker
+        guesses = [predicted, *(se3_inv(kf.T_w_c) for kf in reversed(self.tracking.snapshot.keyframes[-3:]))]
+        step = max(2.0 * cfg.rotation_hypotheses_deg, 4.0)
+        # without a trusted velocity the prediction may be a whole frame's turn off (tracking starts mid-bound)
+        rings = 1 if self.motion.velocity_trusted else cfg.relocalisation_rings
+        for k in range(1, rings + 1):
+            guesses += rotation_hypotheses(predicted, k * step)
+        return self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
+
+    def _remember_event(self, ev_frame: EventFrame, depth_m: np.ndarray, T_c_w: np.ndarray) -> None:
+        """Keep this frame's surface for the next frame's event map (built ahead when the next frame will fuse)."""
+        self.event_side.remember(ev_frame, depth_m, T_c_w, self.predictor.is_fast())
+
+    def _insert(self, request: KeyframeRequest) -> bool:
+        """Ask mapping for a keyframe (one at a time; a reset waits for its answer); True when it was asked."""
+        if not request.reset and self.mapping.busy():
+            return False
+        snap = self.mapping.insert(request, wait=request.reset)
+        if snap is not None:
+            self.tracking.set_snapshot(snap)
+        return True
+
+    def _unmappable(self, prepared: PreparedFrame, T_c_w: np.ndarray) -> str | None:
+        """Why a map built from this frame alone would not constrain the pose (None when it would).
+
+        A textureless wall, a covered lens with no depth, a frame of sky: mapping it would give a map
+        that no later frame can be tracked against. The test is the frame tracked against its own
+        candidate map at its own pose: the same checks (singular system, degenerate geometry) as any frame.
+        """
+        why = "this frame cannot anchor a map: "
+        if prepared.n_valid_depth == 0:
+            return why + ("no valid depth in this frame (check the depth topic's encoding and scale, "
+                          "and rig.depth_min_m / depth_max_m)")
+        candidate = Mapper(self.config, self.cameras).insert(Tracking.reset_request(prepared, T_c_w))
+        probe = Tracking(self.config, self.cameras)
+        probe.set_snapshot(candidate)
+        if not probe.has_map:
+            return why + "no map point could be selected (no texture, no depth structure)"
+        verdict = probe.track(prepared, [T_c_w], (0.0, 0.0), T_c_w).verdict
+        return None if verdict.level == OK else why + str(verdict.reason)
+
+    def _initialise(self, prepared: PreparedFrame, stamp: int, T_c_w: np.ndarray, t0: float,
+                    note: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
+        first = self.mapping.n_keyframes == 0  # never had a map: still initialising (e.g. no depth yet)
+        why_not = self._unmappable(prepared, T_c_w)
+        ok = why_not is None and self._insert(Tracking.reset_request(prepared, T_c_w)) and self.tracking.has_map
+        t_track = time.perf_counter() - t0
+        if ok:
+            self._affine = (0.0, 0.0)
+            status = TrackingStatus.INITIALISING if first else TrackingStatus.REINITIALISED
+            self.last_loss_reason = note
+        else:
+            status = TrackingStatus.INITIALISING if first else TrackingStatus.LOST
+            self.last_loss_reason = why_not
+        self.motion.push(stamp, T_c_w, trusted=first)  # the first pose defines odom; a later one is a guess
+        if ev_frame is not None:
+            self._remember_event(ev_frame, prepared.depth_m, T_c_w)
+        return self._result(stamp, T_c_w, None, status, t_track, ok)
+
+    def _reinitialise(self, prepared: PreparedFrame, stamp: int, predicted: np.ndarray, t0: float,
+                      reason: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
+        """Tracking and relocalisation failed: a new map from this frame at the predicted pose (no jump, no NaN).
+
+        A frame that cannot anchor a map (:meth:`_unmappable`) leaves the old map in place: the frame is
+        lost, the pose follows the motion model, and the next good frame is tracked against the old map.
+        """
+        why_not = self._unmappable(prepared, predicted)
+        ok = why_not is None and self._insert(Tracking.reset_request(prepared, predicted)) and self.tracking.has_map
+        t_track = time.perf_counter() - t0
+        if ok:
+            self._affine = (0.0, 0.0)
+            self._blurred_keyframe = self.predictor.is_fast()  # a new map from mid-turn: replace it once the turn slows
+            self.motion.reset()
+        else:
+            reason = f"{reason}; {why_not}" if reason else why_not
+        self.motion.push(stamp, predicted, trusted=False)
+        # the new map and this frame's event surface share the predicted pose: a consistent base for the next
+        self.event_side.forget()
+        if ok and ev_frame is not None:
+            self._remember_event(ev_frame, prepared.depth_m, predicted)
+        status = TrackingStatus.REINITIALISED if ok else TrackingStatus.LOST
+        self.last_loss_reason = reason
+        return self._result(stamp, predicted, None, status, t_track, ok)
+
+    # ------------------------------------------------------------------ output
+    def _result(self, stamp: int, T_c_w: np.ndarray, out: TrackingOutcome | None, status: TrackingStatus,
+                t_track: float, kf: bool, fused: bool = False) -> OdometryResult:
+        """The published result, in odom/base, at the stamp plus ``time_offset_s`` (pose moved off the frame clock)."""
+        stamp, T_c_w = self.timing.published(stamp, T_c_w, self.motion)
+        em = self.tracking.event_map
+        return self._results(stamp, T_c_w, out, status, t_track=t_track, kf=kf, fused=fused,
+                             n_points=len(self.tracking.snapshot), dropped=self.event_side.take_dropped(),
+                             event_map_time_s=em.build_time_s if fused and em is not None else 0.0,
+                             reason=self.last_loss_reason)
+
+
+__all__ = ["Odometry", "OdometryResult", "RgbdFrame", "TrackingStatus"]

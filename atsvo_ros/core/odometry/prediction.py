@@ -1,0 +1,106 @@
+"""The odometry's predictions: what the motion model and the gyro say about a frame before it is tracked."""
+from __future__ import annotations
+
+import numpy as np
+
+from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.core.odometry.gyro import GyroBuffer
+from atsvo_ros.core.rolling_shutter import RollingShutter
+from atsvo_ros.core.tracking.checks import Priors
+from atsvo_ros.core.tracking.motion import MotionModel
+from atsvo_ros.core.tracking.residuals.prior import MotionPrior
+
+
+class Predictor:
+    """Starting points, priors, row timing and the relative-motion factor of a frame, from the poses so far.
+
+    Args:
+        config: the odometry's configuration (``tracker``, ``fusion``, ``rgb_camera.readout_time_s``).
+        motion: the odometry's motion model (read, never changed here).
+        gyro: the odometry's IMU buffer.
+        image_height: rows of the colour image (its rolling shutter's rows).
+    """
+
+    def __init__(self, config: AtsvoConfig, motion: MotionModel, gyro: GyroBuffer, image_height: int) -> None:
+        self.config = config
+        self.motion = motion
+        self.gyro = gyro
+        self.image_height = image_height
+
+    def gyro_pose(self, stamp: int) -> np.ndarray | None:
+        """``T_c_w`` with the rotation since the last frame from the gyro, or None when the IMU does not cover it."""
+        last = self.motion.last
+        if last is None:
+            return None
+        R_c0_c1 = self.gyro.camera_rotation(last[0], stamp)
+        if R_c0_c1 is None:
+            return None
+        return self.motion.predict_with_rotation(stamp, R_c0_c1.T)
+
+    def guesses(self, stamp: int, predicted: np.ndarray, gyro: np.ndarray | None, fast: bool,
+                event_rate_ratio: float | None) -> list[np.ndarray]:
+        """Starting points: the gyro's prediction (with an IMU), constant motion, zero motion, and while the
+        camera turns fast (or the events say it speeds up: ``event_rate_ratio``) the constant motion scaled."""
+        guesses = [predicted] if gyro is None else [gyro, predicted]
+        if self.motion.last is None or np.allclose(self.motion.last[1], predicted):
+            return guesses
+        guesses.append(self.motion.last[1])  # zero motion
+        if gyro is not None:
+            return guesses
+        scales = list(self.config.tracker.velocity_scales) if fast else []
+        if event_rate_ratio is not None and event_rate_ratio > 1.5:
+            # Events per frame grow with the image motion: a surge of events says the turn sped up.
+            scales += [0.75 * event_rate_ratio, event_rate_ratio, 1.25 * event_rate_ratio]
+        return guesses + [self.motion.predict_scaled(stamp, k) for k in scales]
+
+    def priors(self, stamp: int, gyro: np.ndarray | None) -> Priors:
+        """What the motion says this frame's pose should be: the gyro's prediction and, after two trusted frames,
+        the constant-velocity camera centre with the reach of ``tracker.max_acceleration_m_s2``."""
+        cfg = self.config.tracker
+        centre = self.motion.centre_prior(stamp, cfg.max_acceleration_m_s2, cfg.motion_noise_m)
+        prior = None
+        a_m, a_rad = cfg.motion_prior_acceleration_m_s2, cfg.motion_prior_angular_acceleration_rad_s2
+        spread = self.motion.prediction_spread(stamp) if a_m > 0 and a_rad > 0 else None
+        if spread is not None:  # the last two poses are trusted
+            # Centred on constant velocity even with a gyro (which stays a guess and a check): a node that releases
+            # a frame before its IMU arrives would otherwise track it against another prior than the replay (1.5 mm
+            # apart in CI).
+            prior = MotionPrior(self.motion.predict(stamp), a_m * spread, a_rad * spread, cfg.motion_prior_huber)
+        if centre is None:
+            return Priors(gyro, motion=prior)
+        return Priors(gyro, *centre, motion=prior)
+
+    def rolling_shutter(self, stamp: int) -> RollingShutter | None:
+        """Row timing of the colour (and depth) image when the camera has a rolling shutter."""
+        cam = self.config.rgb_camera
+        last = self.motion.last
+        if cam.readout_time_s == 0.0 or last is None or stamp <= last[0]:
+            return None
+        return RollingShutter.centred(cam.readout_time_s, self.image_height, last[1], (stamp - last[0]) * 1e-9)
+
+    def motion_rates(self) -> tuple[float, float] | None:
+        """The paper's relative-motion factor: camera angular rate (rad/s) and speed (m/s) over the last two frames.
+
+        The angular rate comes from the gyro when it covers the interval (measured, not estimated), else
+        from the two poses; None before two frames.
+        """
+        rel = self.motion.relative_motion()
+        if rel is None:
+            return None
+        ang, speed = rel
+        hist = self.motion.history
+        if len(hist) == 2:
+            rate = self.gyro.angular_rate(hist[0][0], hist[1][0])
+            if rate is not None:
+                ang = rate
+        return ang, speed
+
+    def is_fast(self) -> bool:
+        """The relative-motion factor of the last two frames is above a threshold (angular rate or speed)."""
+        rates = self.motion_rates()
+        fu = self.config.fusion
+        return rates is not None and (np.degrees(rates[0]) > fu.rate_threshold_deg_s
+                                      or rates[1] > fu.speed_threshold_m_s)
+
+
+__all__ = ["Predictor"]

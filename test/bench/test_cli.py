@@ -1,0 +1,15 @@
+"""``atsvo-bench``'s command line: every benchmark registered as a subcommand."""
+from __future__ import annotations
+
+from atsvo_ros.bench.cli import SUBCOMMANDS, build_parser
+from atsvo_ros.bench.events import bench_decode, main_events
+
+
+def test_bench_front_end_and_decode_part_run():
+    """Smoke test of ``atsvo-bench events`` (no timing asserted: benchmarks are not tests)."""
+    assert "events" in SUBCOMMANDS
+    args = build_parser().parse_args(["events", "--events", "1000", "--repeats", "1"])
+    assert args.events == 1000 and args._target is main_events
+    rows = bench_decode(3000, 1000, 1)
+    assert {r["encoding"] for r in rows} >= {"libcaer_cmp", "libcaer", "mono", "evt3"}
+    assert all(r["ours_eps"] > 0 and r["rosbags_eps"] > 0 for r in rows)
