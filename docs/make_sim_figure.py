@@ -1,4 +1,4 @@
-"""Make docs/sim_backflip.png: colour frame (motion blur), depth and events in the middle of a backflip.
+"""Make docs/sim_backflip.png: colour (motion blur), D455 depth, true depth and events in a backflip.
 
 Usage: ``python docs/make_sim_figure.py [--out docs/sim_backflip.png] [--seed 1]`` (about a minute:
 the sequence is generated up to the chosen frame only).
@@ -13,6 +13,7 @@ import numpy as np
 
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.geometry import so3_log
+from atsvo_ros.sim.render import Renderer
 from atsvo_ros.sim.sequence import RgbdFrame, SequenceSpec, Simulation, iter_sequence
 
 
@@ -54,14 +55,18 @@ def main() -> None:
     img[ev.y[ev.p == 1], ev.x[ev.p == 1]] = (0.85, 0.1, 0.1)
     img[ev.y[ev.p == 0], ev.x[ev.p == 0]] = (0.1, 0.2, 0.85)
     depth = frame.depth_m
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.2), dpi=100)
+    sim = Simulation(spec)
+    truth = Renderer(sim.scene, sim.rig.rgb_camera).render(sim.T_world_rgb(stamp))[1]
+    fig, axes = plt.subplots(1, 4, figsize=(16, 3.2), dpi=100)
     axes[0].imshow(frame.rgb)
     axes[0].set_title(f"RGB, {spec.exposure_s * 1e3:.0f} ms exposure (motion blur)")
     im = axes[1].imshow(np.ma.masked_invalid(depth), cmap="turbo", vmin=0.3, vmax=6.0)
-    axes[1].set_title("aligned depth (m), holes = invalid")
+    axes[1].set_title(f"D455 depth (m), exposed {sim.depth_phase_s * 1e3:+.1f} ms away; holes = none")
     fig.colorbar(im, ax=axes[1], fraction=0.035, pad=0.02)
-    axes[2].imshow(img, interpolation="nearest")
-    axes[2].set_title(f"events +/-{args.window_ms / 2:g} ms ({len(ev)}; red ON, blue OFF)")
+    axes[2].imshow(truth, cmap="turbo", vmin=0.3, vmax=6.0)
+    axes[2].set_title("true depth at the colour image's time")
+    axes[3].imshow(img, interpolation="nearest")
+    axes[3].set_title(f"events +/-{args.window_ms / 2:g} ms ({len(ev)}; red ON, blue OFF)")
     for a in axes:
         a.set_axis_off()
     t_s = (stamp - spec.start_ns) * 1e-9

@@ -13,6 +13,7 @@ Also runnable as ``python -m atsvo_ros.bench.tracking``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import os
@@ -29,21 +30,31 @@ from tqdm import tqdm
 from atsvo_ros.config import load_config
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.imu import ImuBatch
-from atsvo_ros.eval.metrics import EvalOptions, evaluate
+from atsvo_ros.eval.metrics import EvalOptions, errors_by_label, evaluate
 from atsvo_ros.io.trajectory import Trajectory
 from atsvo_ros.runtime.runtime import OdometryRuntime
+from atsvo_ros.sim.motion import PHASES
+from atsvo_ros.sim.rgbd import DepthModel
 from atsvo_ros.sim.sequence import SequenceSpec, make_simulation, model_key
+from atsvo_ros.sim.stereo import StereoModel
 from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
 from atsvo_ros.tools.demo import cache_dir
 
-#: Bump when the simulator's RGB-D or IMU output for a given spec changes.
-FRAME_CACHE_VERSION = 2
+#: Bump when the cache's layout changes (the simulator's own changes are in :func:`model_key`).
+FRAME_CACHE_VERSION = 3
 
 
-def _cache_file(spec: Any) -> Path:
-    key = json.dumps([FRAME_CACHE_VERSION, spec.scenario, spec.duration_s, spec.seed, spec.width, spec.height,
-                      spec.config, spec.imu], sort_keys=True)
+def _cache_file(spec: SequenceSpec) -> Path:
+    """Where a spec's frames are cached: keyed on the simulator's model and the whole spec (sensor models included)."""
+    key = f"{FRAME_CACHE_VERSION}|{model_key()}|{spec!r}"
     return cache_dir() / "frames" / f"{spec.scenario}_{spec.seed}_{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
+
+
+def _events_cache_file(spec: SequenceSpec) -> Path:
+    """The event stream's cache: the depth sensor does not change the events, so sequences that differ only in
+    it share one."""
+    same = dataclasses.replace(spec, depth=None, stereo_model=StereoModel(), depth_model=DepthModel())
+    return _cache_file(same).with_name(f"{_cache_file(same).stem}_events.npz")
 
 
 def simulated_frames(spec: Any, progress: bool = True) -> tuple[list[tuple[int, np.ndarray, np.ndarray]], Any, Any]:
@@ -74,8 +85,7 @@ def simulated_events(spec: Any, progress: bool = True) -> Any:
     """The whole event stream of a sequence as one EventBatch, cached on disk like the frames."""
 
 
-    # the event model changes more often than the colour/depth one: its own key (a new model, new events)
-    path = _cache_file(spec).with_name(f"{_cache_file(spec).stem}_events_{model_key()}.npz")
+    path = _events_cache_file(spec)
     if path.is_file():
         with np.load(path) as z:
             return EventBatch(z["x"], z["y"], z["t"], z["p"], int(z["w"]), int(z["h"]))
@@ -144,16 +154,18 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
                  overrides: dict[str, Any] | None = None, width: int | None = None, height: int | None = None,
                  progress: bool = True, use_imu: bool = False, loss_limit_cm: float = 10.0,
                  use_events: bool = False, flood_factor: float = 1.0, stamp_jitter_s: float = 0.0,
-                 stamp_latency_s: float = 0.0) -> dict[str, Any]:
+                 stamp_latency_s: float = 0.0, depth: str | None = None) -> dict[str, Any]:
     """Simulate (or load) one sequence, track it through the runtime, score it; a flat dict of figures.
 
     ``stamp_jitter_s`` / ``stamp_latency_s`` > 0 stamp the RGB-D frames as a host-stamping driver does
     (``RgbModel.stamp_jitter_s`` / ``stamp_latency_s``): the images stay on the frame clock, the poses are
-    scored against the ground truth at the times they are published at.
+    scored against the ground truth at the times they are published at. ``depth``: the simulator's depth
+    sensor (``d455`` or ``sharp``; default the layout's, the D455). The figures include, per motion phase
+    (stance, flight, landing), the ATE and RPE per frame of that phase's frames (``phases``).
     """
 
     spec = SequenceSpec(scenario=scenario, duration_s=duration_s, seed=seed, config=config, width=width,
-                        height=height)
+                        height=height, depth=depth)
     frames, imu, sim = simulated_frames(spec, progress)
     if stamp_jitter_s > 0 or stamp_latency_s > 0:
         delays_ns = sim.stamp_delays_ns(len(frames), stamp_jitter_s, stamp_latency_s)
@@ -217,6 +229,8 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
         "latency_ms_p99": float(np.percentile(all_t, 99)), "latency_ms_max": float(np.max(all_t)),
         "events_dropped": int(rt.counters.get("events_dropped", 0)) + int(rt.assembler.stats.dropped_events),
         "flood_factor": flood_factor, "stamp_jitter_s": stamp_jitter_s, "stamp_latency_s": stamp_latency_s,
+        "depth": spec.depth_sensor, "phases": errors_by_label(ev, sim.motion.phase(ev.stamps_ns), PHASES),
+        "lost": statuses.count("lost"), "reinitialised": statuses.count("reinitialised"),
     }
 
 

@@ -36,6 +36,7 @@ Definitions (numpy only; ``evo`` is used in the tests as an independent cross-ch
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -95,6 +96,30 @@ class EvalResult:
                                 if k not in ("diverged", "diverged_at_s", "tracked_fraction")}
         out["extra"] = extra
         return out
+
+
+def errors_by_label(ev: EvalResult, labels: np.ndarray, names: Sequence[str]) -> dict[str, dict[str, float]]:
+    """ATE RMSE and mean RPE per frame over the frames of each label (e.g. a legged robot's motion phases).
+
+    ``labels`` holds one index into ``names`` per evaluated pose (``ev.stamps_ns``); a frame-to-frame error
+    counts for the label of the pair's second frame. The poses keep the whole run's alignment, so the
+    figures add up to the run's: they say where its error was made.
+    """
+    labels = np.asarray(labels)
+    if labels.shape != ev.stamps_ns.shape:
+        raise EvaluationError(f"{len(labels)} labels for {len(ev.stamps_ns)} evaluated poses")
+    out: dict[str, dict[str, float]] = {}
+    for i, name in enumerate(names):
+        sel = labels == i
+        pair = sel[1:]
+        if not sel.any():
+            continue
+        out[name] = {"frames": int(sel.sum()),
+                     "ate_rmse_cm": float(np.sqrt(np.mean(ev.position_errors_m[sel] ** 2)) * 100.0),
+                     "rpe_deg_per_frame": float(np.mean(ev.rpe_rot_deg[pair])) if pair.any() else float("nan"),
+                     "rpe_cm_per_frame": float(np.mean(ev.rpe_trans_m[pair]) * 100.0) if pair.any()
+                     else float("nan")}
+    return out
 
 
 # ---------------------------------------------------------------------------- association
@@ -382,4 +407,4 @@ def format_metrics(metrics: dict[str, Any]) -> str:
 
 
 __all__ = ["ALIGN_METHODS", "EvalOptions", "EvalResult", "align", "angle_segments", "associate", "evaluate",
-           "evaluate_files", "format_metrics", "relative_errors", "rotation_angle_deg", "umeyama"]
+           "errors_by_label", "evaluate_files", "format_metrics", "relative_errors", "rotation_angle_deg", "umeyama"]

@@ -102,13 +102,13 @@ class EventModel:
         return order * (self.scan_sweep_s * 1e9 / width)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _log(irradiance, eps, out):
     for i in range(irradiance.shape[0]):
         out[i] = np.log(irradiance[i] + eps)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pixel_events(L0, irradiance, eps, L1, t0, t1, origin, state_ref, state_arm, state_latch, state_read, cpos, cneg,
                   refr_ns, res_ns, period_ns, col_off, width, n_pix, n_t, n_pol):
     """Events of all pixels read in (t0, t1]; the log intensity is linear from ``L0`` to ``L1`` (filled here

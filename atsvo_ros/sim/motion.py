@@ -32,6 +32,43 @@ GAITS: dict[str, tuple[float, float]] = {
 BOUND_PEAK_RATE_DPS = 260.0
 BACKFLIP_PEAK_RATE_DPS = 560.0
 
+_FLIP_CROUCH_S, _FLIP_PUSH_S = 0.4, 0.2  # the backflip's crouch and push-off
+
+#: Motion phases of :meth:`Motion.phase`: on the feet, airborne, and the first frames after a touchdown.
+PHASES = ("stance", "flight", "landing")
+#: How long after a touchdown counts as landing: the few frames its jitter shakes (three at 30 Hz).
+LANDING_WINDOW_S = 0.1
+
+
+@dataclass(frozen=True)
+class Touchdown:
+    """The trunk's shake after a foot strike: a damped oscillation of the camera mount, per gait.
+
+    Not measured on the robot (no Mini-Cheetah IMU log is at hand): chosen so that the IMU sees what
+    quadruped trunk IMUs are reported to see at foot strikes, 1-2 g vertical spikes and gyro swings of
+    50-150 deg/s ringing at the 15-25 Hz of a stiff camera mount, over ~0.05 s. Fit to the robot's IMU
+    log when there is one: these are the numbers to change.
+
+    Attributes:
+        height_m / pitch_deg / roll_deg: amplitudes of the oscillation.
+        freq_hz / decay_s: its frequency and decay time.
+    """
+
+    height_m: float
+    pitch_deg: float
+    roll_deg: float
+    freq_hz: float
+    decay_s: float
+
+
+#: Touchdown shakes per gait: a trot strikes with one diagonal pair at a time (roll and pitch), a bound
+#: with the front then the rear pair (pitch), a pronk with all four feet (height and pitch).
+TOUCHDOWNS: dict[str, Touchdown] = {
+    "trot": Touchdown(0.0010, 0.4, 0.4, 19.0, 0.04),
+    "bound": Touchdown(0.0015, 0.8, 0.1, 16.0, 0.05),
+    "pronk": Touchdown(0.0040, 1.2, 0.2, 20.0, 0.055),
+}
+
 
 def smoothstep5(x: np.ndarray) -> np.ndarray:
     """Quintic 0 -> 1 ramp on [0, 1] with zero first and second derivatives at both ends."""
@@ -130,6 +167,33 @@ class Motion:
     def t_end_ns(self) -> int:
         return self.t0_ns + int(round(self.duration_s * 1e9))
 
+    def phase(self, t_ns) -> np.ndarray:
+        """The motion phase (index into :data:`PHASES`) at int64 ns stamp(s): stance, flight or landing.
+
+        Landing is the :data:`LANDING_WINDOW_S` after a touchdown of the gait that dominates at the time
+        (every foot strike of a trot or bound, a pronk's or the backflip's touchdown); flight is a pronk's
+        or the flip's airborne time (the flying camera is always in flight); stance is the rest.
+        """
+        t = (np.atleast_1d(np.asarray(t_ns, dtype=np.int64)) - self.t0_ns).astype(np.float64) * 1e-9
+        out = np.zeros(len(t), np.int64)
+        if self.scenario == "flying":
+            out[:] = PHASES.index("flight")
+            return out
+        w = self.params["schedule"].weights(t)
+        dominant = np.array(list(w))[np.argmax(np.stack(list(w.values())), axis=0)]
+        landing, flight = PHASES.index("landing"), PHASES.index("flight")
+        for gait in ("trot", "bound"):
+            out[(dominant == gait) & (self._since_touchdown(t, gait) < LANDING_WINDOW_S)] = landing
+        pronk = dominant == "pronk"
+        out[pronk & (self._pronk_since_touchdown(t) < LANDING_WINDOW_S)] = landing
+        out[pronk & (np.mod(t, self.params["pronk_air_s"] + self.params["pronk_stance_s"])
+                     < self.params["pronk_air_s"])] = flight
+        if self.scenario == "backflip":
+            t_to, t_land = self._flip_times()
+            out[(t >= t_to) & (t < t_land)] = flight
+            out[(t >= t_land) & (t < t_land + 3 * LANDING_WINDOW_S)] = landing  # the flip's landing rings longer
+        return out
+
     # ------------------------------------------------------------------ internals
     def _path(self, dist: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Ellipse around the free area; arc parameter from the distance walked (approximate arc length)."""
@@ -166,18 +230,21 @@ class Motion:
         z += w["trot"] * 0.010 * np.cos(4 * np.pi * f * t)
         roll += w["trot"] * np.radians(2.0) * np.sin(2 * np.pi * f * t)
         pitch += w["trot"] * np.radians(1.2) * np.sin(4 * np.pi * f * t + 0.7)
+        # Touchdowns: a diagonal pair strikes twice per stride, as the bounce starts down.
+        self._shake(t, w["trot"], self._since_touchdown(t, "trot"), 0.5 / f, TOUCHDOWNS["trot"], z, pitch, roll,
+                    alternate_roll=True)
         # Bound: front/rear pairs -> large pitch oscillation; height bounce at the stride frequency.
         f = GAITS["bound"][1]
         amp = np.radians(BOUND_PEAK_RATE_DPS) / (2 * np.pi * f) / 1.0 * p["bound_gain"]
         pitch += w["bound"] * amp * (np.sin(2 * np.pi * f * t) + 0.15 * np.sin(4 * np.pi * f * t + 0.4)) / 1.3
         z += w["bound"] * (0.035 * np.cos(2 * np.pi * f * t + 0.6) + 0.01)
+        # Touchdowns: the front pair, then the rear pair half a stride later.
+        self._shake(t, w["bound"], self._since_touchdown(t, "bound"), 0.5 / f, TOUCHDOWNS["bound"], z, pitch, roll)
         # Pronk: ballistic hops, spring-like stance, vibration after each touchdown.
         z += w["pronk"] * self._pronk_height(t)
         tau_td = self._pronk_since_touchdown(t)
         period = self.params["pronk_air_s"] + self.params["pronk_stance_s"]
-        for k in range(4):  # the latest touchdowns' vibrations (older ones have died out)
-            z += w["pronk"] * _vibration(tau_td + k * period, 0.004, 23.0, 0.05)
-            pitch += w["pronk"] * _vibration(tau_td + k * period, np.radians(1.2), 17.0, 0.06)
+        self._shake(t, w["pronk"], tau_td, period, TOUCHDOWNS["pronk"], z, pitch, roll)
         pitch += w["pronk"] * np.radians(2.0) * np.sin(2 * np.pi * GAITS["pronk"][1] * t + 0.3)
         if self.scenario == "backflip":
             dz, dpitch, dx = self._backflip(t)
@@ -186,6 +253,33 @@ class Motion:
             xy = xy + dx[:, None] * np.column_stack([np.cos(yaw), np.sin(yaw)])
         pos = np.column_stack([xy, z])
         return pos, np.column_stack([yaw, pitch, roll])
+
+    def _since_touchdown(self, t: np.ndarray, gait: str) -> np.ndarray:
+        """Seconds since the last touchdown of a trot or bound (two strikes per stride, as the bounce goes down)."""
+        f = GAITS[gait][1]
+        half = 0.5 / f
+        if gait == "trot":  # z = cos(4 pi f t): falling fastest at 4 pi f t = pi / 2 (mod 2 pi)
+            t0 = 0.125 / f
+        else:  # z = cos(2 pi f t + 0.6): falling fastest at 2 pi f t + 0.6 = pi / 2
+            t0 = (0.5 * np.pi - 0.6) / (2 * np.pi * f)
+        return np.mod(t - t0, half)
+
+    @staticmethod
+    def _shake(t: np.ndarray, weight: np.ndarray, since: np.ndarray, period: float, td: Touchdown, z: np.ndarray,
+               pitch: np.ndarray, roll: np.ndarray, alternate_roll: bool = False) -> None:
+        """Add the damped shakes of the latest touchdowns (``since``: time since the last one, every ``period``)."""
+        # A shake fades out smoothly between 4 and 8 decay times (from 2 % of its amplitude): a strike leaves the sum
+        # at exactly zero, so the pose stays smooth when the oldest one is dropped.
+        n_live = int(np.ceil(8.0 * td.decay_s / period)) + 1
+        for k in range(n_live):
+            tau = since + k * period
+            fade = weight * (1.0 - smoothstep5((tau - 4.0 * td.decay_s) / (4.0 * td.decay_s)))
+            sign = 1.0
+            if alternate_roll:  # the two diagonal pairs roll the trunk opposite ways
+                sign = np.where(np.mod(np.floor((t - tau) / period + 0.5), 2) == 0, 1.0, -1.0)
+            z += fade * _vibration(tau, td.height_m, td.freq_hz, td.decay_s)
+            pitch += fade * _vibration(tau, np.radians(td.pitch_deg), td.freq_hz, td.decay_s)
+            roll += fade * sign * _vibration(tau, np.radians(td.roll_deg), 0.85 * td.freq_hz, td.decay_s)
 
     def _pronk_height(self, t: np.ndarray) -> np.ndarray:
         t_air, t_st = self.params["pronk_air_s"], self.params["pronk_stance_s"]
@@ -205,15 +299,19 @@ class Motion:
         period = t_air + t_st
         return np.mod(t - t_air, period)
 
+    def _flip_times(self) -> tuple[float, float]:
+        """Take-off and touchdown of the backflip, in seconds of sequence time."""
+        t_to = self.params["flip_t_s"] + _FLIP_CROUCH_S + _FLIP_PUSH_S
+        return t_to, t_to + self.params["flip_air_s"]
+
     def _backflip(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Crouch, push-off, aerial full pitch rotation, landing with impact; offsets to the stand pose."""
         p = self.params
         t_c = p["flip_t_s"]  # crouch start
-        crouch_s, push_s, air_s = 0.4, 0.2, p["flip_air_s"]
+        crouch_s, push_s, air_s = _FLIP_CROUCH_S, _FLIP_PUSH_S, p["flip_air_s"]
         crouch_m = 0.08
         t_p = t_c + crouch_s
-        t_to = t_p + push_s
-        t_land = t_to + air_s
+        t_to, t_land = self._flip_times()
         v0 = GRAVITY * air_s / 2.0
         # Height offset: crouch, Hermite push from (-crouch, 0) to (h_to, v0), flight, damped landing.
         h_to = -crouch_m + 0.5 * v0 * push_s

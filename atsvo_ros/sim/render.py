@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit
 
 from atsvo_ros.core.camera import CameraModel
+from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.sim.scene import Scene
 
 _TILE = 8
@@ -49,7 +50,7 @@ def _room_exit(o, d_lo, d_hi, room_lo, room_hi):
     return 1e30, 0
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def _cast(rays, pix_angle, pix_tile, R, t, room_min, room_max, box_c, box_h, box_cs, tile_boxes, tile_count,
           box_cam, box_rot, box_lo, face_tex,
           face_tpm, face_off, face_tint, tex_data, tex_off, tex_size, light, ambient, light_ref2, out_grey,
@@ -207,7 +208,7 @@ def _cast(rays, pix_angle, pix_tile, R, t, room_min, room_max, box_c, box_h, box
             out_rgb[i, 2] = g * face_tint[face, 2]
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def _cull_tiles(tile_axis, tile_cone, vis, box_cam, tile_boxes, tile_count):
     """Per pixel tile, the boxes whose bounding sphere meets the tile's cone of rays."""
     for k in range(tile_axis.shape[0]):
@@ -301,6 +302,36 @@ class Renderer:
         if rgb:
             return grey.reshape(shape), depth.reshape(shape), col.reshape(shape + (3,))
         return grey.reshape(shape), depth.reshape(shape)
+
+
+class MotionProbe:
+    """Largest apparent motion (px) of the scene between two camera poses, from a grid of 3-D points."""
+
+    def __init__(self, camera: CameraModel, rays: np.ndarray, step_px: int = 8) -> None:
+        self.camera = camera
+        h, w = camera.height, camera.width
+        step = max(1, min(step_px, w // 8, h // 8))
+        vv, uu = np.meshgrid(np.arange(0, h, step), np.arange(0, w, step), indexing="ij")
+        uu = np.concatenate([uu.ravel(), [w - 1, 0, w - 1, 0]])
+        vv = np.concatenate([vv.ravel(), [h - 1, h - 1, 0, 0]])
+        self.index = vv * w + uu
+        self.uv = np.column_stack([uu, vv]).astype(np.float64)
+        self.rays = rays
+
+    def max_motion_px(self, depth: np.ndarray, T_w_c0: np.ndarray, T_w_c1: np.ndarray) -> np.ndarray | float:
+        """Max pixel motion from pose ``T_w_c0`` to ``T_w_c1`` (one pose, or a stack -> one value each)."""
+        d = depth.ravel()
+        imin = int(np.argmin(d))
+        idx = np.append(self.index, imin)
+        uv0 = np.vstack([self.uv, [imin % self.camera.width, imin // self.camera.width]])
+        p0 = self.rays[idx] * d[idx, None]
+        single = np.ndim(T_w_c1) == 2
+        T = se3_inv(np.asarray(T_w_c1).reshape(-1, 4, 4)) @ T_w_c0
+        p1 = np.matmul(p0[None], np.swapaxes(T[:, :3, :3], 1, 2)) + T[:, None, :3, 3]
+        uv1, _ = self.camera.project(p1.reshape(-1, 3))
+        err = np.abs(uv1.reshape(len(T), -1, 2) - uv0).max(axis=2).max(axis=1)
+        err[np.any(p1[:, :, 2] < 0.02, axis=1)] = np.inf
+        return float(err[0]) if single else err
 
 
 def render_view(scene: Scene, camera: CameraModel, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

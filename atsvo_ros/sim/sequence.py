@@ -7,7 +7,11 @@ stream to a bag. Streams, merged by stamp:
 * RGB-D ``RgbdFrame(stamp_ns, rgb, depth_mm)``: the stamp is the middle of the exposure (plus the
   host-stamping delay ``RgbModel.stamp_latency_s`` + ``stamp_jitter_s``, 0 by default); the
   colour image averages sub-frames spread over the exposure (no more than ``max_blur_step_px``
-  apparent motion between two), the depth is rendered at the stamp;
+  apparent motion between two). The depth (``SequenceSpec.depth``): ``d455``, the D455's active
+  stereo exposed ``StereoModel.phase_s`` away from the colour image and registered to it
+  (:mod:`atsvo_ros.sim.stereo`, the robot layout's default), or ``sharp``, rendered at the stamp
+  with noise growing with z^2 and holes at depth edges (MVSEC's default; the simulator before the D455
+  model, kept to show what a too kind sensor flatters);
 * events as :class:`EventBatch` packets of ``event_packet_s``, yielded when the packet is complete
   (merge key = packet end). The event camera is rendered at an adaptive rate: the next render time
   is chosen so that no scene point moves more than ``EventModel.max_step_px`` between renders
@@ -23,6 +27,8 @@ from __future__ import annotations
 
 import hashlib
 import heapq
+import queue
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
@@ -37,15 +43,18 @@ from atsvo_ros.errors import SimulationError
 from atsvo_ros.sim.events import EventModel, EventSensor
 from atsvo_ros.sim.imu import ImuModel, ImuSensor
 from atsvo_ros.sim.motion import GRAVITY, SCENARIOS, Motion, make_motion
-from atsvo_ros.sim.render import Renderer
+from atsvo_ros.sim.render import MotionProbe, Renderer
 from atsvo_ros.sim.rgbd import ColorSensor, DepthModel, RgbModel, depth_to_mm, row_weights
 from atsvo_ros.sim.scene import Scene, make_scene
+from atsvo_ros.sim.stereo import DepthCapture, StereoDepthSensor, StereoModel, depth_phase_s, stereo_depth_to_mm
 
 LAYOUTS = ("robot", "mvsec")
+DEPTH_MODELS = ("d455", "sharp")
 DEFAULT_START_NS = 1_700_000_000_000_000_000
 #: Bump whenever the simulator's output for an unchanged spec changes (sensor models, rendering, motion):
 #: caches of generated sequences key on :func:`model_key`. 2: the DVXplorer's scanned readout and pixel reset.
-MODEL_VERSION = 2
+#: 3: the D455's active-stereo depth with its own exposure time.
+MODEL_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -71,6 +80,8 @@ class SequenceSpec:
     event_model: EventModel = field(default_factory=EventModel)
     imu: bool = True  # simulate the colour camera's IMU (layout robot only; MVSEC's DAVIS IMU is not modelled)
     imu_model: ImuModel = field(default_factory=ImuModel)
+    depth: str | None = None  # d455 or sharp; None = d455 (robot layout) or sharp (mvsec)
+    stereo_model: StereoModel = field(default_factory=StereoModel)
 
     def __post_init__(self) -> None:
         if self.scenario not in SCENARIOS:
@@ -86,9 +97,35 @@ class SequenceSpec:
                                   f"period (1/{self.rate_hz} s)")
         if not 0.05 <= self.event_scale <= 4.0:
             raise SimulationError(f"event_scale must be in [0.05, 4], got {self.event_scale}")
+        if self.depth is not None and self.depth not in DEPTH_MODELS:
+            raise SimulationError(f"unknown depth model {self.depth!r} (choose one of {', '.join(DEPTH_MODELS)})")
         for v in (self.width, self.height):
             if v is not None and not 8 <= v <= 4096:
                 raise SimulationError(f"image size must be in [8, 4096] px, got {v}")
+
+
+    @property
+    def depth_sensor(self) -> str:
+        """The depth sensor: ``depth``, or the layout's own (D455 for the robot, sharp for MVSEC)."""
+        return self.depth or ("sharp" if self.layout == "mvsec" else "d455")
+
+
+@dataclass(frozen=True)
+class FrameReport:
+    """What the sensors gave for one RGB-D frame (``atsvo-sim``'s per-phase summary is made of these).
+
+    ``depth_valid`` is the share of colour pixels with depth; ``depth_error`` the median of |measured -
+    true| / true depth at the colour image's time (so it includes the depth frame's timing), over pixels
+    with depth; ``colour_blur_px`` / ``ir_blur_px`` the largest apparent motion over the colour / IR
+    exposure; ``ir_exposure_s`` 0 without an IR model.
+    """
+
+    stamp_ns: int
+    depth_valid: float
+    depth_error: float
+    colour_blur_px: float
+    ir_blur_px: float = 0.0
+    ir_exposure_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -167,12 +204,19 @@ class Simulation:
         self.scene = scene or make_scene(spec.seed, spec.texture_size)
         self.motion: Motion = make_motion(spec.scenario, spec.duration_s, spec.seed, self.scene.free_xy,
                                           t0_ns=spec.start_ns)
-        seeds = np.random.SeedSequence([spec.seed, 0x5E9]).spawn(5)
+        seeds = np.random.SeedSequence([spec.seed, 0x5E9]).spawn(6)
         self._rng_rgb, self._rng_depth, self._rng_events = (np.random.default_rng(s) for s in seeds[:3])
         self._stamp_seed = seeds[4]
+        self._stereo_seed = seeds[5]
         self._imu_seed = seeds[3]
         dm = spec.depth_model
         self.depth_model = replace(dm, min_m=self.rig.config.rig.depth_min_m, max_m=self.rig.config.rig.depth_max_m)
+        #: the D455 model: its IR images keep their own size whatever the colour image's (a smaller depth image is
+        #: a noisier sensor, which the tracker's depth noise model would not expect)
+        self.stereo_model = spec.stereo_model
+        #: depth exposure centre minus colour exposure centre (the D455 model; 0 for sharp depth)
+        self.depth_phase_s = 0.0 if spec.depth_sensor != "d455" else depth_phase_s(
+            spec.stereo_model, spec.rate_hz, np.random.default_rng(self._stereo_seed.spawn(1)[0]))
         # Camera pose in the world = body pose x physical mount; ground truth for the config's base.
         self._T_rgb_base = se3_inv(self.rig.T_base_rgb)
         self.check_clearance()
@@ -259,13 +303,18 @@ class Simulation:
         depth_renderer = None if rig.depth_camera == rig.rgb_camera else Renderer(self.scene, rig.depth_camera)
         sensor = ColorSensor(spec.rgb_model, spec.exposure_s, renderer.rays,
                              (rig.rgb_camera.height, rig.rgb_camera.width), self._rng_rgb)
-        probe = _MotionProbe(rig.rgb_camera, renderer.rays)
+        probe = MotionProbe(rig.rgb_camera, renderer.rays)
         n = int(np.floor(spec.duration_s * spec.rate_hz + 1e-9)) + 1
         readout_s = spec.rgb_model.readout_time_s
         # Sub-frames span the exposure, and with a rolling shutter the readout as well (each row then
         # averages the sub-frames inside its own exposure window; depth stays global shutter).
         half = int(round((spec.exposure_s + readout_s) * 0.5e9))
         delays_ns = self.stamp_delays_ns(n)
+        stereo = None if spec.depth_sensor != "d455" else StereoDepthSensor(
+            self.stereo_model, self.scene, rig.rgb_camera, self.T_world_rgb, self._rng_depth)
+        phase_ns = int(round(self.depth_phase_s * 1e9))
+        if stats is not None:
+            stats["depth_phase_s"] = self.depth_phase_s
         depth_prev = None
         for k in range(n):
             stamp = self.t_start_ns + int(round(k * 1e9 / spec.rate_hz))
@@ -293,8 +342,15 @@ class Simulation:
                 stats["rgb_renders"] = stats.get("rgb_renders", 0) + n_sub
             rgb = sensor.expose([acc * np.float32(1.0 / n_sub)], stamp)
             depth = depth_prev if depth_renderer is None else depth_renderer.render(poses[n_sub // 2])[1]
+            if stereo is None:
+                depth_mm, ir = depth_to_mm(depth, self.depth_model, self._rng_depth), None
+            else:
+                ir = stereo.capture(stamp + phase_ns)
+                depth_mm = stereo_depth_to_mm(ir.depth_m, self.depth_model.min_m, self.depth_model.max_m)
+            if stats is not None:
+                stats.setdefault("frames", []).append(_report(stamp, depth_mm, depth, moved, ir))
             # the image is exposed on the frame clock; a host-stamping driver reports it when it arrives
-            yield RgbdFrame(stamp + int(delays_ns[k]), rgb, depth_to_mm(depth, self.depth_model, self._rng_depth))
+            yield RgbdFrame(stamp + int(delays_ns[k]), rgb, depth_mm)
 
     def events(self, stats: dict | None = None) -> Iterator[EventBatch]:
         """Event packets of ``event_packet_s`` (empty packets are skipped), in time order.
@@ -305,7 +361,7 @@ class Simulation:
         spec, cam = self.spec, self.rig.event_camera
         m = spec.event_model
         renderer = Renderer(self.scene, cam)
-        probe = _MotionProbe(cam, renderer.rays)
+        probe = MotionProbe(cam, renderer.rays)
         sensor = EventSensor(m, cam.width, cam.height, self._rng_events)
         t, t_end = self.t_start_ns, self.t_end_ns
         T = self.T_world_event(t)
@@ -360,34 +416,14 @@ class Simulation:
             stats["event_renders"] = renders
 
 
-class _MotionProbe:
-    """Largest apparent motion (px) of the scene between two camera poses, from a grid of 3-D points."""
-
-    def __init__(self, camera: CameraModel, rays: np.ndarray, step_px: int = 8) -> None:
-        self.camera = camera
-        h, w = camera.height, camera.width
-        step = max(1, min(step_px, w // 8, h // 8))
-        vv, uu = np.meshgrid(np.arange(0, h, step), np.arange(0, w, step), indexing="ij")
-        uu = np.concatenate([uu.ravel(), [w - 1, 0, w - 1, 0]])
-        vv = np.concatenate([vv.ravel(), [h - 1, h - 1, 0, 0]])
-        self.index = vv * w + uu
-        self.uv = np.column_stack([uu, vv]).astype(np.float64)
-        self.rays = rays
-
-    def max_motion_px(self, depth: np.ndarray, T_w_c0: np.ndarray, T_w_c1: np.ndarray) -> np.ndarray | float:
-        """Max pixel motion from pose ``T_w_c0`` to ``T_w_c1`` (one pose, or a stack -> one value each)."""
-        d = depth.ravel()
-        imin = int(np.argmin(d))
-        idx = np.append(self.index, imin)
-        uv0 = np.vstack([self.uv, [imin % self.camera.width, imin // self.camera.width]])
-        p0 = self.rays[idx] * d[idx, None]
-        single = np.ndim(T_w_c1) == 2
-        T = se3_inv(np.asarray(T_w_c1).reshape(-1, 4, 4)) @ T_w_c0
-        p1 = np.matmul(p0[None], np.swapaxes(T[:, :3, :3], 1, 2)) + T[:, None, :3, 3]
-        uv1, _ = self.camera.project(p1.reshape(-1, 3))
-        err = np.abs(uv1.reshape(len(T), -1, 2) - uv0).max(axis=2).max(axis=1)
-        err[np.any(p1[:, :, 2] < 0.02, axis=1)] = np.inf
-        return float(err[0]) if single else err
+def _report(stamp_ns: int, depth_mm: np.ndarray, depth_true_m: np.ndarray, colour_blur_px: float,
+            ir: DepthCapture | None) -> FrameReport:
+    """One frame's :class:`FrameReport`: depth validity and error against the true depth at the colour time."""
+    valid = depth_mm > 0
+    z = depth_true_m[valid]
+    err = float(np.median(np.abs(depth_mm[valid] * 1e-3 - z) / z)) if valid.any() else float("nan")
+    return FrameReport(int(stamp_ns), float(valid.mean()), err, float(colour_blur_px),
+                       0.0 if ir is None else ir.ir_blur_px, 0.0 if ir is None else ir.exposure_s)
 
 
 def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
@@ -410,12 +446,50 @@ def iter_sequence(spec: SequenceSpec, scene: Scene | None = None,
         k = (b.t_first_ns - sim.t_start_ns) // packet_ns + 1
         return min(sim.t_start_ns + k * packet_ns, sim.t_end_ns + 1)
 
+    # The RGB-D frames (colour sub-frames, both IR imagers, stereo matching) are made in a thread of their own
+    # while this one makes the events: the renderers and the matcher release the GIL, so two cores share the
+    # work. Each stream draws from its own random generator: the data is the same as in one thread.
     streams = [keyed(sim.ground_truth(), 0, lambda g: g.stamp_ns),
-               keyed(sim.frames(stats), 1, lambda f: f.stamp_ns),
+               keyed(_ahead(sim.frames(stats)), 1, lambda f: f.stamp_ns),
                keyed(sim.events(stats), 2, event_key),
                keyed(sim.imu(stats), 3, lambda b: b.t_first_ns)]
     for _, _, item in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
         yield item
+
+
+def _ahead(items: Iterator, depth: int = 4) -> Iterator:
+    """``items`` produced in a background thread, at most ``depth`` ahead; its errors are raised here."""
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def produce() -> None:
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        q.put((item, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put((done, None))
+        except BaseException as exc:  # handed to the consumer, which raises it
+            q.put((done, exc))
+
+    worker = threading.Thread(target=produce, name="atsvo-sim-frames", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = q.get()
+            if exc is not None:
+                raise exc
+            if item is done:
+                return
+            yield item
+    finally:
+        stop.set()
 
 
 def model_key() -> str:
@@ -430,5 +504,5 @@ def make_simulation(spec: SequenceSpec, scene: Scene | None = None) -> Simulatio
     return Simulation(spec, scene)
 
 
-__all__ = ["GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation", "iter_sequence",
-           "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig"]
+__all__ = ["DEPTH_MODELS", "FrameReport", "GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig",
+           "Simulation", "iter_sequence", "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig"]

@@ -29,6 +29,9 @@ from atsvo_ros.errors import SimulationError
 from atsvo_ros.io.encode import ENCODINGS, serialize_dvs_event_array, serialize_event_packet
 from atsvo_ros.io.msgtypes import transient_local_qos, typestore
 from atsvo_ros.io.trajectory import Trajectory, write_tum
+from atsvo_ros.sim.motion import make_motion
+from atsvo_ros.sim.report import format_summary, summarise
+from atsvo_ros.sim.scene import scene_free_xy
 from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, SimRig, iter_sequence, model_key, sequence_rig
 
 FORMATS = ("mcap", "sqlite3", "ros1")
@@ -263,6 +266,7 @@ def _generate(spec: SequenceSpec, out: Path, fmt: str, event_msg: str, encoding:
     else:
         bag_path = out  # rosbags creates the ROS 2 bag directory
     counts = {"frames": 0, "event_packets": 0, "events": 0, "poses": 0, "imu_samples": 0}
+    event_counts: list[tuple[int, int]] = []
     stats: dict[str, Any] = {}
     gt_stamps, gt_poses = [], []
     mvsec = spec.layout == "mvsec"
@@ -309,6 +313,7 @@ def _generate(spec: SequenceSpec, out: Path, fmt: str, event_msg: str, encoding:
                 seq += 1
                 counts["event_packets"] += 1
                 counts["events"] += len(item)
+                event_counts.append((stamp, len(item)))
             elif isinstance(item, ImuBatch) and topics.imu is not None:
                 for s, g, a in zip(item.stamps_ns.tolist(), item.gyro_rad_s, item.accel_m_s2):
                     m = msgs.imu(s, IMU_FRAME, g, a, gyro_var, accel_var)
@@ -318,10 +323,15 @@ def _generate(spec: SequenceSpec, out: Path, fmt: str, event_msg: str, encoding:
     wall = time.perf_counter() - wall0
     write_tum(out / "groundtruth.tum", Trajectory(np.asarray(gt_stamps), np.asarray(gt_poses)),
               header=f"atsvo-sim {spec.scenario} seed {spec.seed}: T_world_{rig.config.topics.base_frame}")
+    motion = make_motion(spec.scenario, spec.duration_s, spec.seed, scene_free_xy(spec.seed), t0_ns=spec.start_ns)
+    phases = summarise(motion, stats.get("frames", []), event_counts)
     summary = {**counts, "event_renders": int(stats.get("event_renders", 0)),
                "rgb_renders": int(stats.get("rgb_renders", 0)), "wall_s": round(wall, 2),
-               "bag": str(final_bag)}
-    _write_description(out / "sequence.yaml", spec, rig, topics, fmt, event_msg, encoding, summary,
+               "bag": str(final_bag), "depth_sensor": spec.depth_sensor,
+               "depth_phase_s": round(float(stats.get("depth_phase_s", 0.0)), 6),
+               "phases": [r.as_dict() for r in phases], "phase_table": format_summary(phases)}
+    _write_description(out / "sequence.yaml", spec, rig, topics, fmt, event_msg, encoding,
+                       {k: v for k, v in summary.items() if k != "phase_table"},
                        stats.get("imu"))
     return summary
 
@@ -365,7 +375,9 @@ def _write_description(path: Path, spec: SequenceSpec, rig: SimRig, topics: BagT
                 "T_rgb_event": plain(rig.T_rgb_event), "T_rgb_imu": plain(rig.T_rgb_imu)},
         "topics": {k: list(v) for k, v in dataclasses.asdict(topics).items() if v is not None},
         "models": {"rgb": plain(dataclasses.asdict(spec.rgb_model)),
-                   "depth": plain(dataclasses.asdict(spec.depth_model)),
+                   "depth": ({"sensor": "d455", **plain(dataclasses.asdict(spec.stereo_model)),
+                              "phase_s_this_seed": summary.get("depth_phase_s")} if spec.depth_sensor == "d455"
+                             else {"sensor": "sharp", **plain(dataclasses.asdict(spec.depth_model))}),
                    "events": plain(dataclasses.asdict(spec.event_model)),
                    **({"imu": {**plain(spec.imu_model.to_dict()), "frame": IMU_FRAME, "this_seed": imu_draws}}
                       if topics.imu is not None else {})},

@@ -13,7 +13,8 @@ from collections.abc import Sequence
 
 from atsvo_ros.sim.events import EventModel
 from atsvo_ros.sim.motion import SCENARIOS
-from atsvo_ros.sim.sequence import LAYOUTS, SequenceSpec
+from atsvo_ros.sim.sequence import DEPTH_MODELS, LAYOUTS, SequenceSpec
+from atsvo_ros.sim.stereo import StereoModel
 from atsvo_ros.sim.writer import EVENT_ENCODINGS, EVENT_MSGS, FORMATS, write_sequence
 from atsvo_ros.tools._cli import run
 
@@ -28,6 +29,15 @@ def _main(args: argparse.Namespace) -> int:
         spec = dataclasses.replace(spec, rgb_model=dataclasses.replace(
             spec.rgb_model, readout_time_s=args.rgb_readout, stamp_jitter_s=args.rgb_stamp_jitter,
             stamp_latency_s=args.rgb_stamp_latency))
+    stereo: dict = {}
+    if args.ir_exposure is not None:
+        stereo["exposure_s"] = args.ir_exposure
+    if args.ir_ambient is not None:
+        stereo["ambient_ir"] = args.ir_ambient
+    if args.depth_phase is not None:
+        stereo["phase_s"] = args.depth_phase
+    spec = dataclasses.replace(spec, depth=args.depth,
+                               stereo_model=dataclasses.replace(spec.stereo_model, **stereo))
     summary = write_sequence(spec, args.out, fmt=args.format, event_msg=args.event_msg, encoding=args.encoding,
                              force=args.force, progress=not args.quiet)
     print(f"{args.scenario} {args.duration:g} s seed {args.seed}: {summary['frames']} RGB-D frames, "
@@ -35,6 +45,7 @@ def _main(args: argparse.Namespace) -> int:
           f"({summary['event_renders']} event renders, {summary['rgb_renders']} colour sub-frames), "
           f"{summary['poses']} poses, {summary['imu_samples']} IMU samples; "
           f"{summary['wall_s']:.1f} s wall -> {summary['bag']}", file=sys.stderr)
+    print(f"what the sensors gave (depth: {summary['depth_sensor']}):\n{summary['phase_table']}", file=sys.stderr)
     return 0
 
 
@@ -66,7 +77,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="topics/types: the robot's drivers or MVSEC's (default robot)")
     p.add_argument("--config", default=None,
                    help="rig preset or YAML (default: synthetic, or mvsec for --layout mvsec)")
-    p.add_argument("--width", type=int, default=None, help="colour image width (intrinsics scale with it)")
+    p.add_argument("--width", type=int, default=None,
+                   help="colour image width (intrinsics scale with it; the D455's IR images keep their size)")
     p.add_argument("--height", type=int, default=None, help="colour image height")
     p.add_argument("--rate", type=float, default=30.0, help="RGB-D frame rate in Hz (default 30)")
     p.add_argument("--exposure", type=float, default=0.008, help="colour exposure time in s (motion blur; 0.008)")
@@ -97,6 +109,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--refractory-us", type=float, default=None,
                    help=f"pixel reset after an event in us; change during it is lost (default "
                         f"{em.refractory_s * 1e6:g}, between one and two scans as measured)")
+    sm = StereoModel()
+    p.add_argument("--depth", default=None, choices=DEPTH_MODELS,
+                   help="depth sensor: d455 (active IR stereo exposed at its own time, registered to colour; the "
+                        "robot layout's default) or sharp (rendered at the colour stamp: the too kind model before, "
+                        "MVSEC's default)")
+    p.add_argument("--ir-exposure", type=float, default=None,
+                   help="d455: fixed IR exposure in s (default: auto-exposure, up to the frame period)")
+    p.add_argument("--ir-ambient", type=float, default=None,
+                   help=f"d455: the room's IR light against the projector's (default {sm.ambient_ir:g}; lower = a "
+                        "dimmer room, longer auto-exposures, more blur)")
+    p.add_argument("--depth-phase", type=float, default=None,
+                   help="d455: depth exposure centre minus colour exposure centre in s (default: drawn from the "
+                        "seed within half a frame period; the D455 cannot synchronise them)")
     p.add_argument("--no-imu", action="store_true", help="layout robot: no IMU topic (default: the D455's "
                    "BMI055 on /camera/camera/imu at ~200 Hz)")
     p.add_argument("--force", action="store_true", help="replace an existing atsvo-sim output in --out")

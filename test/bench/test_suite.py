@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from atsvo_ros.bench.report import README_BEGIN, README_END, markdown, readme_block
+from atsvo_ros.bench.report import README_BEGIN, README_END, markdown
 from atsvo_ros.bench.suite import QUICK, update_readme
 from atsvo_ros.errors import ConfigError
 
@@ -13,7 +13,9 @@ from atsvo_ros.errors import ConfigError
 def _acc(scenario: str, seed: int, mode: str, ate_cm: float, lost: int = 0) -> dict:
     return {"scenario": scenario, "seed": seed, "mode": mode, "ate_rmse_cm": ate_cm, "rpe_deg_per_deg": 0.5,
             "rpe_cm_per_deg": 0.8, "diverged": ate_cm > 10, "statuses": {"ok": 89, "lost": lost},
-            "modes": {"fused": 40, "rgbd": 50}, "frames": 90}
+            "modes": {"fused": 40, "rgbd": 50}, "frames": 90, "lost": lost, "reinitialised": 0,
+            "phases": {"stance": {"ate_rmse_cm": ate_cm / 2, "rpe_deg_per_frame": 0.1, "rpe_cm_per_frame": 0.2},
+                       "flight": {"ate_rmse_cm": ate_cm * 2, "rpe_deg_per_frame": 1.5, "rpe_cm_per_frame": 2.0}}}
 
 
 def _results() -> dict:
@@ -60,13 +62,17 @@ def test_readme_block_is_replaced_and_the_rest_kept(tmp_path: Path) -> None:
     md.write_text(markdown(_results()))
     fig = tmp_path / "backflip.png"
     fig.write_bytes(b"\x89PNG\r\n\x1a\n")
-    update_readme(readme, md, fig)
+    full = update_readme(readme, _results(), md, fig)
     text = readme.read_text()
     assert "old table" not in text and text.startswith("# pkg\n\nintro") and text.endswith("## After\n")
-    assert "### Speed of the event front end" in text and "# atsvo-bench results" not in text
+    # the README gets the accuracy per motion phase; docs/results.md everything
+    assert "### Accuracy per motion phase" in text and "| backflip | rgbd | 65.00 | 65.00 | 32.50 / 0.100 / 0.20 | " \
+        "130.00 / 1.500 / 2.00 | - | 3 |" in text
+    assert "### Speed of the event front end" not in text and "(docs/results.md)" in text
+    assert full == tmp_path / "docs" / "results.md" and "## Speed of the event front end" in full.read_text()
     assert "(docs/results_backflip.png)" in text and (tmp_path / "docs" / "results_backflip.png").is_file()
-    # idempotent: a second fill gives the same file
-    update_readme(readme, md, fig)
+    # idempotent: a second fill gives the same files
+    update_readme(readme, _results(), md, fig)
     assert readme.read_text() == text
 
 
@@ -74,6 +80,6 @@ def test_readme_without_markers_is_a_clear_error(tmp_path: Path) -> None:
     readme = tmp_path / "README.md"
     readme.write_text("# pkg\n")
     md = tmp_path / "results.md"
-    md.write_text(readme_block("# t\n\n## a\n", None))
+    md.write_text(markdown(_results()))
     with pytest.raises(ConfigError, match="no .* block"):
-        update_readme(readme, md, None)
+        update_readme(readme, _results(), md, None)

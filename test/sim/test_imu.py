@@ -103,8 +103,12 @@ def test_noise_free_gyro_is_the_angular_velocity_of_the_gait_curves(scenario):
 
 
 def test_noise_free_accelerometer_integrates_to_the_ground_truth_velocity():
-    """Strapdown check: v(t1) - v(t0) = sum of (R_world_imu f - g) dt, with the same-clock accelerometer."""
-    spec = SequenceSpec(scenario="trot", duration_s=2.0, seed=3, imu_model=ImuModel.ideal(accel_rate_hz=0.0))
+    """Strapdown check: v(t1) - v(t0) = sum of (R_world_imu f - g) dt, with the same-clock accelerometer.
+
+    Sampled at 1 kHz: the trapezoid rule follows the trot's 19 Hz touchdown shakes (1-2 g) only at that rate.
+    """
+    spec = SequenceSpec(scenario="trot", duration_s=2.0, seed=3,
+                        imu_model=ImuModel.ideal(gyro_rate_hz=1000.0, accel_rate_hz=0.0))
     sim = Simulation(spec)
     imu = ImuBatch.concatenate(list(sim.imu()))
     R = sim.T_world_imu(imu.stamps_ns)[:, :3, :3]
@@ -116,7 +120,7 @@ def test_noise_free_accelerometer_integrates_to_the_ground_truth_velocity():
         return (sim.T_world_imu(t_ns + 50_000)[:, :3, 3] - sim.T_world_imu(t_ns - 50_000)[:, :3, 3]) / 1e-4
 
     v = velocity(imu.stamps_ns)
-    assert np.abs(v[1:] - v[0] - dv).max() < 2e-3  # m/s after 2 s, with ~1 m/s^2 accelerations
+    assert np.abs(v[1:] - v[0] - dv).max() < 2e-3  # m/s after 2 s
 
 
 def test_white_noise_has_the_datasheet_density():

@@ -14,7 +14,7 @@ from atsvo_ros.errors import SimulationError
 from atsvo_ros.sim.events import EventModel
 from atsvo_ros.sim.rgbd import DepthModel
 from atsvo_ros.sim.scene import build_scene
-from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, iter_sequence, sequence_rig
+from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, Simulation, iter_sequence, sequence_rig
 
 TINY = {"width": 64, "event_scale": 0.25, "texture_size": 32, "gt_rate_hz": 200.0}
 
@@ -142,9 +142,11 @@ def _event_edge_fraction(events, poses, rig, T_rgb_event, edge_w, tol_px: float)
 
 def test_ground_truth_extrinsics_and_intrinsics_put_scene_points_where_they_are_rendered():
     scene = _marker_scene()
+    # sharp depth: the check is of the rig's geometry (the D455 model's timing and matching errors are scored
+    # against the truth in test_stereo.py)
     spec = SequenceSpec(scenario="flying", duration_s=0.4, seed=3, width=160, event_scale=0.5, texture_size=16,
                         event_model=EventModel(noise_rate_hz=0.0),
-                        depth_model=DepthModel(dropout_fraction=0.0))
+                        depth_model=DepthModel(dropout_fraction=0.0), depth="sharp")
     rig = sequence_rig(spec)
     frames, events, poses, _ = _collect(spec, scene)
     edge_w = _edge_points(scene)
@@ -275,3 +277,18 @@ def test_host_stamp_jitter_and_latency_delay_the_stamps_not_the_images():
     np.testing.assert_array_equal(make_simulation(spec).stamp_delays_ns(4, 0.0, 0.01), np.full(4, 10_000_000))
     with pytest.raises(SimulationError):
         dataclasses.replace(spec.rgb_model, stamp_latency_s=-0.01)
+
+
+def test_the_robot_layout_gets_the_d455_depth_and_mvsec_the_sharp_one():
+    assert SequenceSpec().depth_sensor == "d455" and SequenceSpec(layout="mvsec").depth_sensor == "sharp"
+    stats: dict = {}
+    spec = SequenceSpec(scenario="bound", duration_s=0.3, seed=4, **TINY)
+    frames = [f for f in iter_sequence(spec, stats=stats) if isinstance(f, RgbdFrame)]
+    sim = Simulation(spec)
+    assert abs(stats["depth_phase_s"]) <= 0.5 / spec.rate_hz and stats["depth_phase_s"] == sim.depth_phase_s
+    reports = stats["frames"]
+    assert [r.stamp_ns for r in reports] == [f.stamp_ns for f in frames]
+    for r, f in zip(reports, frames):
+        assert r.depth_valid == pytest.approx(np.mean(f.depth_mm > 0)) and 0.0 < r.ir_exposure_s <= 0.033
+    with pytest.raises(SimulationError, match="depth model"):
+        SequenceSpec(depth="kinect")

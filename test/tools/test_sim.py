@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import pytest
+import yaml
 
 from atsvo_ros.tools.sim import main
 
@@ -15,7 +16,22 @@ def test_cli_writes_a_sequence(tmp_path, capsys):
     assert code == 0
     assert (out / "sequence.bag").is_file() and (out / "groundtruth.tum").is_file()
     assert (out / "sequence.yaml").is_file()
-    assert "RGB-D frames" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "RGB-D frames" in err
+    # what the sensors gave, per motion phase (the trot strikes the ground twice per stride: landing frames)
+    assert "depth: d455" in err and "stance" in err and "landing" in err and "events/s" in err
+
+
+def test_cli_depth_and_ir_options_reach_the_model(tmp_path):
+    out = tmp_path / "b"
+    assert main(["--scenario", "bound", "--duration", "0.2", "--out", str(out), "--ir-exposure", "0.004",
+                 "--ir-ambient", "0.1", "--depth-phase", "0.005", *TINY]) == 0
+    depth = yaml.safe_load((out / "sequence.yaml").read_text())["models"]["depth"]
+    assert depth["sensor"] == "d455" and depth["exposure_s"] == 0.004 and depth["ambient_ir"] == 0.1
+    assert depth["phase_s_this_seed"] == 0.005
+    assert main(["--scenario", "bound", "--duration", "0.2", "--out", str(tmp_path / "s"), "--depth", "sharp",
+                 *TINY]) == 0
+    assert yaml.safe_load((tmp_path / "s" / "sequence.yaml").read_text())["models"]["depth"]["sensor"] == "sharp"
 
 
 def test_cli_reports_user_errors_in_one_line(tmp_path, capsys):

@@ -63,7 +63,9 @@ def test_asynchronous_mapping_tracks_on_with_the_last_snapshot(trot):
     results, n_kf = _run(sim, frames, ThreadedMapping, paced=True)
     assert n_kf > 3 and all(r.status in (TrackingStatus.INITIALISING, TrackingStatus.OK) for r in results)
     err = _position_errors_m(sim, results)
-    assert err.max() < 0.02, err.max()  # as accurate as inline (measured 0.3-1.0 cm on seeds 0-3)
+    inline = _position_errors_m(sim, _run(sim, frames)[0])
+    # as accurate as inline on the same frames (the simulated D455's depth costs both ~1-3 cm over 2 s of trot)
+    assert err.max() < inline.max() + 0.01, (err.max(), inline.max())
 
 
 def _slow_mapping(mapper):

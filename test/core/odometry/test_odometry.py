@@ -217,30 +217,42 @@ def test_events_feed_the_surface_and_their_buffer_stays_bounded(config):
     assert rgbd_only.events is None
 
 
-def test_short_synthetic_trot_is_accurate():
-    """A few seconds of the simulator's trot (noise, blur, auto-exposure, vignetting, depth noise)."""
-    from atsvo_ros.eval.metrics import evaluate
-    from atsvo_ros.io.trajectory import Trajectory
+def _track_trot(depth: str) -> tuple[np.ndarray, list, object]:
     from atsvo_ros.sim.sequence import SequenceSpec, make_simulation
 
-    sim = make_simulation(SequenceSpec(scenario="trot", duration_s=3.0, seed=4, width=320, height=240))
+    sim = make_simulation(SequenceSpec(scenario="trot", duration_s=3.0, seed=4, width=320, height=240, depth=depth))
     odo = Odometry(load_config("synthetic"), sim.rig.rgb_camera)
-    stamps, poses, statuses = [], [], []
-    for f in sim.frames():
-        r = odo.process_frame(RgbdFrame(f.stamp_ns, f.rgb, f.depth_m))
-        stamps.append(r.stamp_ns)
-        poses.append(r.T_odom_base)
-        statuses.append(r.status)
-    stamps = np.asarray(stamps, dtype=np.int64)
-    assert statuses[0] is TrackingStatus.INITIALISING
-    assert all(s is TrackingStatus.OK for s in statuses[1:])
-    gt = Trajectory(stamps, sim.T_world_base(stamps))
+    results = [odo.process_frame(RgbdFrame(f.stamp_ns, f.rgb, f.depth_m)) for f in sim.frames()]
+    stamps = np.array([r.stamp_ns for r in results], dtype=np.int64)
+    assert results[0].status is TrackingStatus.INITIALISING
+    assert all(r.status is TrackingStatus.OK for r in results[1:])
     # The odom frame is the base at the first frame: no alignment needed to compare.
-    gt_odom = se3_inv(gt.T_w_b[0]) @ gt.T_w_b
-    # measured: max error 0.70 cm, ATE 0.33 cm, RPE 0.025 deg/f; limits at ~3x
-    assert np.max(np.linalg.norm(np.asarray(poses)[:, :3, 3] - gt_odom[:, :3, 3], axis=1)) < 0.02
-    m = evaluate(gt, Trajectory(stamps, np.asarray(poses))).metrics
+    gt_odom = se3_inv(sim.T_world_base(stamps[0])) @ sim.T_world_base(stamps)
+    err = np.linalg.norm(np.stack([r.T_odom_base for r in results])[:, :3, 3] - gt_odom[:, :3, 3], axis=1)
+    return err, results, sim
+
+
+def test_short_synthetic_trot_is_accurate_with_an_ideal_depth_camera():
+    """A few seconds of the simulator's trot (noise, blur, auto-exposure, vignetting) with the sharp depth model:
+    depth at the colour image's instant, 2 mm x z^2 noise. What the tracker does when depth is not the problem."""
+    from atsvo_ros.eval.metrics import evaluate
+    from atsvo_ros.io.trajectory import Trajectory
+
+    err, results, sim = _track_trot("sharp")
+    stamps = np.array([r.stamp_ns for r in results], dtype=np.int64)
+    assert err.max() < 0.02  # measured: max error 0.70 cm, ATE 0.33 cm, RPE 0.025 deg/f; limits at ~3x
+    m = evaluate(Trajectory(stamps, sim.T_world_base(stamps)),
+                 Trajectory(stamps, np.stack([r.T_odom_base for r in results]))).metrics
     assert m["ate_rmse_m"] < 0.01 and m["rpe_rot_deg_per_frame"] < 0.075 and not m["diverged"], m
+
+
+def test_short_synthetic_trot_with_the_d455_depth_drifts_a_few_centimetres():
+    """The same trot with the D455 model's depth (active stereo exposed 9.6 ms before the colour image on this
+    seed, registered to it as realsense2_camera does). Measured 4.3 cm at worst over the 3 s (1.8-4.3 cm on
+    seeds 0-4; 0.7-2.4 cm with the exposures in sync): the depth term follows the depth of another instant.
+    A regression guard on that figure, not a goal: the goal is the sharp-depth test's."""
+    err, _, _ = _track_trot("d455")
+    assert err.max() < 0.06
 
 
 def _imu_for(omega_cam: np.ndarray, R_rgb_imu: np.ndarray, t0_ns: int, t1_ns: int):
