@@ -99,6 +99,8 @@ class SequenceSpec:
             raise SimulationError(f"event_scale must be in [0.05, 4], got {self.event_scale}")
         if self.depth is not None and self.depth not in DEPTH_MODELS:
             raise SimulationError(f"unknown depth model {self.depth!r} (choose one of {', '.join(DEPTH_MODELS)})")
+        if self.depth == "d455" and self.layout == "mvsec":
+            raise SimulationError("the D455 depth model needs the robot layout (MVSEC's depth is not a D455's)")
         for v in (self.width, self.height):
             if v is not None and not 8 <= v <= 4096:
                 raise SimulationError(f"image size must be in [8, 4096] px, got {v}")

@@ -292,3 +292,5 @@ def test_the_robot_layout_gets_the_d455_depth_and_mvsec_the_sharp_one():
         assert r.depth_valid == pytest.approx(np.mean(f.depth_mm > 0)) and 0.0 < r.ir_exposure_s <= 0.033
     with pytest.raises(SimulationError, match="depth model"):
         SequenceSpec(depth="kinect")
+    with pytest.raises(SimulationError, match="robot layout"):
+        SequenceSpec(layout="mvsec", depth="d455")
