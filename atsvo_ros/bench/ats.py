@@ -202,11 +202,13 @@ def scene_canvas(kind: str, size: int = 1024, seed: int = 0) -> np.ndarray:
 
 
 def translating_events(kind: str, speed_px_s: float, angle_rad: float, duration_s: float, seed: int,
-                       width: int = 320, height: int = 240) -> tuple[EventBatch, np.ndarray]:
-    """Events of a window moving over :func:`scene_canvas` (content moves at ``speed_px_s`` along the angle)."""
+                       width: int = 320, height: int = 240,
+                       canvas: np.ndarray | None = None) -> tuple[EventBatch, np.ndarray]:
+    """Events of a window moving over :func:`scene_canvas` (content moves at ``speed_px_s`` along the angle).
 
-
-    canvas = scene_canvas(kind, seed=seed)
+    ``canvas`` replaces the scene of ``kind`` (e.g. a mixed dense/sparse one).
+    """
+    canvas = scene_canvas(kind, seed=seed) if canvas is None else canvas
     size = canvas.shape[0]
     vel = speed_px_s * np.array([np.cos(angle_rad), np.sin(angle_rad)])
     origin = np.array([size / 2 - width / 2, size / 2 - height / 2]) - vel * duration_s / 2

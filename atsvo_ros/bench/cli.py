@@ -7,7 +7,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-from atsvo_ros.bench import ats, events, longrun, nodes, real, tracking
+from atsvo_ros.bench import ats, ats_quality, events, longrun, nodes, real, tracking
 from atsvo_ros.bench.suite import add_all_args, main_all
 from atsvo_ros.tools._cli import run
 
@@ -29,6 +29,8 @@ SUBCOMMANDS: dict[str, tuple[AddArgs, Main, str]] = {
              "our RGB-D odometry vs Open3D's on real TUM RGB-D sequences (ATE, RPE, time, wrong-but-ok frames)"),
     "ats-basin": (ats.add_ats_basin_args, ats.main_ats_basin,
                   "convergence basin of the ATS term alone per decay rule (synthetic, simulated and real events)"),
+    "ats-quality": (ats_quality.add_ats_quality_args, ats_quality.main_ats_quality,
+                    "white-out and black-out of each time surface over dense and sparse texture, stand to flip"),
 }
 
 
