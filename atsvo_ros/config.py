@@ -273,18 +273,19 @@ class FusionConfig:
     surface: str = _f("ats", choices=("ats", "constant", "sits"),
                       doc="time surface of the event term: ats (the paper's adaptive one), constant (constant tau) "
                           "or sits (speed-invariant); the last two are ablations")
-    rate_threshold_deg_s: float = _f(300.0, 0.0, 10000.0,
+    rate_threshold_deg_s: float = _f(150.0, 0.0, 10000.0,
                                      doc="camera angular rate over the last two frames (or the gyro's) above which "
-                                         "the event term is used: 10 deg per frame at 30 Hz. RGB-D tracking with the "
-                                         "depth term holds the simulated bound and running (peaks 250-285 deg/s) and "
-                                         "needs the events in the flip (560-580). Measured November 2026 (10 s, "
-                                         "seeds 0-4, with speed_threshold_m_s 5): bound ATE 0.99-1.38 cm at 300 "
-                                         "against 1.23-2.59 at 150; running 0.23-1.79 vs 0.51-2.21; backflip "
-                                         "equal but seed 3 (4.75 vs 3.85)")
+                                         "the event term is used: 5 deg per frame at 30 Hz. Measured November 2026 "
+                                         "on the D455 depth model (320x240, 4 s, tuning seeds 0-4; ATE cm at 300 / "
+                                         "200 / 150 / 100): bound, peaks ~260 deg/s, means 48.4 / 44.3 / 10.2 / 20.7 "
+                                         "(seed 0: 39.0 -> 6.8); 2.4 s backflip 17.1 / 17.1 / 15.2 / -; running 3.8 at "
+                                         "300 against 8.2 at 150 (seed 2: 7.7 -> 28.7, the others within 1.1); trot "
+                                         "and pronk never reach it. On the old sharp depth 300 was better (bound "
+                                         "0.99-1.38 cm against 1.23-2.59): RGB-D alone held the bound there")
     speed_threshold_m_s: float = _f(5.0, 0.0, 100.0,
                                     doc="camera speed over the last two frames above which the event term is used. "
                                         "Translation at v blurs a surface at depth Z as a turn at v / Z rad/s does: "
-                                        "5 m/s at 1 m is rate_threshold_deg_s' 300 deg/s, above a Mini-Cheetah's "
+                                        "5 m/s at 1 m is a 300 deg/s turn, above a Mini-Cheetah's "
                                         "top speed (3.7 m/s). The former 1.5 m/s fused every sixth frame of a "
                                         "bound (1.2 m/s median, 1.9 peak), where the frame-to-frame event term "
                                         "only added drift (bound ATE 1.47-3.57 cm against 0.88-1.38)")
