@@ -226,6 +226,17 @@ def translating_events(kind: str, speed_px_s: float, angle_rad: float, duration_
     return EventBatch.concatenate([p for p in parts if len(p)]), vel
 
 
+def surfaces_at(events: EventBatch, rules: list[str], t_ref: int
+                ) -> tuple[dict[str, np.ndarray], EventBatch, dict[str, np.ndarray]]:
+    """Each rule's 320x240 surface at ``t_ref`` and one frame later, and the events of the frame before ``t_ref``."""
+    surfaces = SurfaceSet(rules, 320, 240, AtsConfig(), keep_ns=FRAME_NS)
+    it, pending = iter([events]), []
+    stream_until(it, surfaces, t_ref, pending)
+    ref, recent = surfaces.render(t_ref), surfaces.recent()
+    stream_until(it, surfaces, t_ref + FRAME_NS, pending)
+    return ref, recent, surfaces.render(t_ref + FRAME_NS)
+
+
 def bench_synthetic(rules: list[str], levels_list: list[int], kinds: list[str], speeds: list[float], reps: int,
                     offsets: list[float], tcfg: TrackerConfig, progress: bool) -> list[dict[str, Any]]:
     """Part ``synthetic``: one row per (scene, speed, rule, levels), see :func:`_synthetic_row`."""
@@ -239,12 +250,7 @@ def bench_synthetic(rules: list[str], levels_list: list[int], kinds: list[str], 
             for rep in range(reps):
                 angle = float(np.random.default_rng(rep).uniform(0, 2 * np.pi))
                 events, vel = translating_events(kind, speed, angle, duration_s, seed=rep)
-                surfaces = SurfaceSet(rules, 320, 240, AtsConfig(), keep_ns=FRAME_NS)
-                it, pending = iter([events]), []
-                stream_until(it, surfaces, t_ref, pending)
-                ref, recent = surfaces.render(t_ref), surfaces.recent()
-                stream_until(it, surfaces, t_ref + FRAME_NS, pending)
-                cur = surfaces.render(t_ref + FRAME_NS)
+                ref, recent, cur = surfaces_at(events, rules, t_ref)
                 shift = vel * FRAME_NS * 1e-9
                 for r in rules:
                     uv = select(ref[r], recent, t_ref)

@@ -41,15 +41,14 @@ from atsvo_ros.bench.ats import (
     FRAME_NS,
     RULES,
     Pair,
-    SurfaceSet,
     _translation,
     point_errors,
     scene_canvas,
     select,
-    stream_until,
+    surfaces_at,
     translating_events,
 )
-from atsvo_ros.config import AtsConfig, EventSelectionConfig, TrackerConfig
+from atsvo_ros.config import EventSelectionConfig, TrackerConfig
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.image.frontend import usable_levels
 from atsvo_ros.errors import ConfigError
@@ -104,12 +103,7 @@ def bench_quality(rules: list[str], speeds: dict[str, float], reps: int, offset_
         for rep in range(reps):
             angle = np.pi / 2 if rep % 2 == 0 else -np.pi / 2  # across the split: each half keeps its texture
             events, vel = translating_events("mixed", speed, angle, duration_s, seed=rep, canvas=mixed_canvas(seed=rep))
-            surfaces = SurfaceSet(rules, 320, 240, AtsConfig(), keep_ns=FRAME_NS)
-            it, pending = iter([events]), []
-            stream_until(it, surfaces, t_ref, pending)
-            ref, recent = surfaces.render(t_ref), surfaces.recent()
-            stream_until(it, surfaces, t_ref + FRAME_NS, pending)
-            cur = surfaces.render(t_ref + FRAME_NS)
+            ref, recent, cur = surfaces_at(events, rules, t_ref)
             shift = vel * FRAME_NS * 1e-9
             for r in rules:
                 uv = select(ref[r], recent, t_ref)
