@@ -99,7 +99,8 @@ def phase_lines(rows: list[dict[str, Any]], settings: dict[str, Any]) -> list[st
     """Per gait and mode, the error of each motion phase's frames, averaged over the seeds."""
 
     phases = ("stance", "flight", "landing")
-    shown = [m for m in ("rgbd", "fused", "rgbd, sharp depth", "fused, sharp depth") if m in settings["modes"]]
+    shown = [m for m in ("rgbd", "fused", "rgbd + gyro", "fused + gyro", "rgbd, sharp depth", "fused, sharp depth")
+             if m in settings["modes"]]
     body = []
     for sc in settings["scenarios"]:
         for m in shown:
@@ -118,7 +119,9 @@ def phase_lines(rows: list[dict[str, Any]], settings: dict[str, Any]) -> list[st
     seeds = ", ".join(str(s) for s in settings["seeds"])
     return [f"## Accuracy per motion phase (seeds {seeds}, {settings['duration_s']:g} s each)", "",
             "Per gait, RGB-D only and fused, on the D455 model's depth (active stereo exposed at its own time, "
-            "registered to colour; `atsvo-sim`) and, for comparison, on the sharp depth of the simulator before it. "
+            "registered to colour; `atsvo-sim`); `+ gyro`: the IMU fed as on the robot, its gyro predicting and "
+            "turning each depth image to the colour's time; for comparison, the sharp depth of the simulator "
+            "before it. "
             "ATE: mean and worst over the seeds (cm). Per phase (the frames of stance, flight and landing, the "
             "whole run's alignment kept): ATE cm / RPE deg per frame / RPE cm per frame, means over the seeds. "
             "Last column: frames lost or re-initialised, all seeds.", "",

@@ -174,6 +174,8 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     flood_ev_s = 0.0
     if events is not None and flood_factor > 1.0 and len(events) > 1:
         flood_ev_s = (flood_factor - 1.0) * len(events) / ((events.t_last_ns - events.t_first_ns) * 1e-9)
+    # the D455 reports each frame's exposure time: the depth/colour offset is known to a driver reading both
+    overrides = {"rig.depth_time_offset_s": sim.depth_phase_s, **(overrides or {})}
     cfg = load_config(spec.config or "synthetic", overrides=overrides)
     rt = OdometryRuntime(cfg, sim.rig.rgb_camera, sim.rig.event_camera,
                          use_events=use_events and cfg.mode == "fused")

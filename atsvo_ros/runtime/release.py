@@ -57,7 +57,10 @@ class FrameRelease:
         self._imu_mark_ns: int | None = None  # newest IMU stamp received
         self._imu_heard_ns: int | None = None  # arrival time (``clock``) of the last IMU samples
         self._await_imu: deque[tuple[RgbdFrame, EventBatch]] = deque()  # paired frames waiting for the IMU
-        self._offset_ns = int(round(config.rgb_camera.time_offset_s * 1e9))
+        # a frame waits for (and takes) the IMU up to its exposure time, or up to its depth's when that is later
+        # (the depth is turned to the colour's time by the gyro in between)
+        self._offset_ns = int(round((config.rgb_camera.time_offset_s + max(0.0, config.rig.depth_time_offset_s))
+                                    * 1e9))
         self._imu_wait_ns = int(round(config.node.imu_max_wait_s * 1e9))  # then the IMU counts as silent
         self._held: deque[FrameInput] = deque()  # frames waiting for the colour camera_info
 

@@ -7,6 +7,7 @@ The colour camera uses :class:`RgbdFrontEnd`; the event camera's ATS image goes 
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
@@ -124,10 +125,15 @@ class RgbdFrontEnd(ImageFrontEnd):
         grey = self.rectify(grey)
         if not frame.depth_rectified:
             depth = self.rectify(depth, nearest=True)
-        dpyr = depth_pyramid(depth, self.n_levels, self.depth_edge_ratio, self.depth_min_m, self.depth_max_m)
         pyr = self.pyramid(grey)
-        return PreparedFrame(int(frame.stamp_ns), pyr, depth, dpyr, int(np.count_nonzero(dpyr[0])),
-                             float(np.std(pyr[min(2, len(pyr) - 1)][..., 0])))
+        return self.with_depth(PreparedFrame(int(frame.stamp_ns), pyr, depth, [], 0,
+                                             float(np.std(pyr[min(2, len(pyr) - 1)][..., 0]))), depth)
+
+    def with_depth(self, prepared: PreparedFrame, depth_m: np.ndarray) -> PreparedFrame:
+        """``prepared`` with another depth image on the rectified grid (e.g. moved to the colour's time)."""
+        dpyr = depth_pyramid(depth_m, self.n_levels, self.depth_edge_ratio, self.depth_min_m, self.depth_max_m)
+        return dataclasses.replace(prepared, depth_m=depth_m, depth_pyramid=dpyr,
+                                   n_valid_depth=int(np.count_nonzero(dpyr[0])))
 
 
 __all__ = ["ImageFrontEnd", "PreparedFrame", "RgbdFrontEnd", "to_grey", "usable_levels"]

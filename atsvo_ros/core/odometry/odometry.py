@@ -34,6 +34,7 @@ from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.events.frontend import EventFrame, EventFrontEnd
 from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.core.image.depth_warp import rotate_depth
 from atsvo_ros.core.image.frontend import PreparedFrame, RgbdFrontEnd
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
@@ -144,7 +145,7 @@ class Odometry:
         t0 = time.perf_counter() - event_time_s
         # internally a frame lives at its exposure time off the frame clock (see FrameTiming)
         stamp = self.timing.exposure(frame.stamp_ns)
-        prepared = self.frontend.prepare(frame)
+        prepared = self._depth_at_colour_time(self.frontend.prepare(frame), stamp)
         newer = self.mapping.latest()  # a keyframe mapping finished meanwhile (threaded or remote mapping)
         if newer is not None:
             self.tracking.set_snapshot(newer)
@@ -221,6 +222,26 @@ class Odometry:
             self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
         self.event_side.end_frame(n_events)
         return self._result(stamp, out.T_c_w, out, status, t_track, kf, fused)
+
+    def _depth_at_colour_time(self, prepared: PreparedFrame, stamp: int) -> PreparedFrame:
+        """Turn a depth image exposed ``rig.depth_time_offset_s`` off the colour to the colour's time.
+
+        The gyro gives the rotation between the two exposures (the translation over that interval is
+        neglected: millimetres). Without gyro samples over the interval the depth is left as it is: the
+        constant-motion prediction's rotation made the flips worse (tuning seeds 0-4, mean ATE 26 cm against
+        17), the true rotation better (6.6).
+        """
+        offset_ns = int(round(self.config.rig.depth_time_offset_s * 1e9))
+        if offset_ns == 0:
+            return prepared
+        if offset_ns > 0:
+            R_c_d = self.gyro.camera_rotation(stamp, stamp + offset_ns)
+        else:
+            R_d_c = self.gyro.camera_rotation(stamp + offset_ns, stamp)
+            R_c_d = None if R_d_c is None else R_d_c.T
+        if R_c_d is None:
+            return prepared
+        return self.frontend.with_depth(prepared, rotate_depth(prepared.depth_m, self.cameras[0], R_c_d))
 
     def _coasts(self, out: TrackingOutcome, stamp: int) -> bool:
         """Whether a degraded frame held by depth and the motion prior alone keeps the motion trusted.
