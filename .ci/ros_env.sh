@@ -35,12 +35,13 @@ _atsvo_ros_env() {
   export FASTRTPS_DEFAULT_PROFILES_FILE="$root/config/fastdds_shm.xml"
   # Default discovery multicasts out of every interface; LOCALHOST keeps DDS on this machine.
   export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
-  export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( $$ % 100 + 1 ))}"
+  # ROS_DOMAIN_ID is left as the user set it (unset: ROS's default, 0), so every shell that sources this
+  # script sees the others' nodes; the test suite takes a private domain of its own (test/nodes/conftest.py).
   if ! python -c "import rclpy, sensor_msgs.msg, event_camera_msgs.msg, dvs_msgs.msg, tf2_msgs.msg" >&2; then
     echo "ros_env.sh: the ROS packages are installed but do not import (see above)" >&2
     return 1
   fi
-  echo "[ros_env] ready: rclpy + event_camera_msgs, dvs_msgs, tf2_msgs; domain $ROS_DOMAIN_ID on loopback" >&2
+  echo "[ros_env] ready: rclpy + event_camera_msgs, dvs_msgs, tf2_msgs; domain ${ROS_DOMAIN_ID:-0} on loopback" >&2
 }
 
 _atsvo_ros_env || { unset -f _atsvo_ros_env; return 1; }

@@ -140,6 +140,12 @@ class TrackingNode(Node):
         if nc.use_imu:
             self.create_subscription(Imu, topics.imu, self._on_imu, stream_qos, callback_group=sensors)
         self.create_service(Trigger, topics.reset_service, self._on_reset, callback_group=self._control_group)
+        # ---- end of stream: once every input has been silent for node.imu_max_wait_s, on two ticks in a row
+        # (a stalled executor runs the callbacks it owes between them), the frames still waiting go out
+        self._heard_ns = time.monotonic_ns()
+        self._silent_ticks = 0
+        self._end_wait_ns = int(nc.imu_max_wait_s * 1e9)
+        self.create_timer(max(0.05, nc.imu_max_wait_s / 2), self._on_silence_tick, callback_group=sensors)
 
         # ---- mapping over topics
         self.request_pub = None
@@ -232,9 +238,29 @@ class TrackingNode(Node):
         self._pump()
 
     def _pump(self) -> None:
-        for inp in self.runtime.pop_ready():
+        self._heard_ns = time.monotonic_ns()
+        self._silent_ticks = 0
+        self._enqueue(self.runtime.pop_ready())
+
+    def _enqueue(self, inputs: list[FrameInput]) -> None:
+        for inp in inputs:
             self.frames_in += 1
             self.queue.put(inp)
+
+    def _on_silence_tick(self) -> None:
+        """End of stream: no input for node.imu_max_wait_s, seen on two ticks: the waiting frames go out.
+
+        The last frame of a stream waits for events and IMU samples past its stamp that never come; the
+        replay releases it at the end of the bag, the node once the silence has lasted this long.
+        """
+        rt = self.runtime
+        if (rt.frames_waiting == 0 and rt.pending == 0) or time.monotonic_ns() - self._heard_ns <= self._end_wait_ns:
+            self._silent_ticks = 0
+            return
+        self._silent_ticks += 1
+        if self._silent_ticks >= 2:
+            self._silent_ticks = 0
+            self._enqueue(rt.flush_inputs())
 
     # ------------------------------------------------------------------ mapping over topics
     def _send_request(self, blob: bytes) -> None:

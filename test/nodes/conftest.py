@@ -4,9 +4,10 @@ With ``ATSVO_REQUIRE_ROS=1`` (set by .ci/run) a missing rclpy or message package
 skip: CI must run these tests.
 
 Fast DDS's default discovery (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET) multicasts to 239.255.0.1 out of
-every interface; LOCALHOST keeps all traffic on this machine. A random domain id keeps concurrent
-runs on one machine (other worktrees, CI) from seeing each other's topics. Values set by the caller
-(e.g. .ci/ros_env.sh) are kept.
+every interface; LOCALHOST keeps all traffic on this machine (a discovery range set by the caller is
+kept). The session always takes a random domain id of its own, whatever the shell has: concurrent runs
+on one machine (other worktrees, CI) and a user's own nodes on the shell's domain never see the tests'
+topics. ``ATSVO_TEST_ROS_DOMAIN_ID`` pins it (to watch a test's topics from another shell).
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ if os.environ.get("ATSVO_REQUIRE_ROS") == "1":
 def _ros_env_on_loopback():
     saved = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")}
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    os.environ["ROS_DOMAIN_ID"] = os.environ.get("ATSVO_TEST_ROS_DOMAIN_ID") or str(random.randint(1, 100))
     yield
     for key, value in saved.items():
         if value is None:

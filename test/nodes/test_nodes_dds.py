@@ -5,8 +5,8 @@ profile config/fastdds_shm.xml (.ci/ros_env.sh exports it): with sensor-data QoS
 best effort: a starved machine may lose frames on the way, the node answers for those it got) and,
 for the pose-for-pose comparison, reliable keep-all on both ends (``node.sensor_qos: reliable``,
 ``ros2 bag play``'s QoS: every frame arrives, whatever the load); a probe subscribes to
-the odometry like a controller. Checked: one odometry per frame (minus what the node counts as
-dropped or still waiting), poses equal to ``atsvo-replay`` with ``mapping.synchronous``, ATE close to
+the odometry like a controller. Checked: one odometry per frame, the last one too (minus what the node counts as
+dropped), poses equal to ``atsvo-replay`` with ``mapping.synchronous``, ATE close to
 the replay's without it, the map, the per-frame status and /diagnostics arrive, the reset service
 works, Ctrl-C ends every process with exit code 0.
 """
@@ -31,8 +31,10 @@ pytest.importorskip("event_camera_msgs.msg", reason="event_camera_msgs not built
 from atsvo_ros.config import load_config  # noqa: E402
 from atsvo_ros.core.geometry import so3_log  # noqa: E402
 from atsvo_ros.eval.metrics import EvalOptions, evaluate  # noqa: E402
+from atsvo_ros.io.sources import open_source  # noqa: E402
 from atsvo_ros.io.trajectory import Trajectory, read_tum  # noqa: E402
 from atsvo_ros.nodes.player import BagPlayer, OdometryProbe, Played, console_script, node_session  # noqa: E402
+from atsvo_ros.runtime import FrameInput, OdometryRuntime  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 PARAMS = ROOT / "config" / "synthetic.yaml"
@@ -86,7 +88,7 @@ def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check
         player, probe, procs = session.player, session.probe, session.procs
         played = player.play(rate=1.0)
         n_frames = len(played.frame_stamps_ns)
-        probe.wait_idle(n_frames - 1, idle_s=4.0)
+        probe.wait_idle(n_frames, idle_s=4.0)  # the last frame goes out once the inputs fall silent
         n_diag = probe.diagnostics_count
         assert probe.wait(lambda: probe.diagnostics_count > n_diag + 1, 10.0), "no /diagnostics"
         diag = probe.diag("atsvo_tracking: odometry")
@@ -138,7 +140,7 @@ def _check_reset(player: BagPlayer, probe: OdometryProbe) -> bool:
     probe.wait_idle(n0 + len(played.frame_stamps_ns), idle_s=3.0)
     stamps, poses = probe.poses(since=n0)
     statuses = probe.statuses(since=n0)
-    # the frame the first run left waiting goes first (at the identity of the new start), then the replayed ones
+    # the replayed frames, from the identity of the new start
     if len(stamps) < len(played.frame_stamps_ns) - 1:
         return False  # frames lost on the way (see _run_delivered); the caller repeats the run once
     assert np.allclose(poses[0], np.eye(4)) and statuses[0] == "initialising", (poses[0], statuses[:3])
@@ -181,7 +183,8 @@ def _check_common(run: Run) -> None:
     # what the issue asks /diagnostics to carry: mode, status, tracking time, queue and decoder drops, rates
     assert {"mode", "status", "tracking_time_ms_p50", "queue_drops", "decoder_drops", "rate_rgb_hz",
             "rate_event_msgs_hz", "rate_odometry_hz"} <= set(d) and d["mode"] in ("fused", "rgbd"), d
-    assert int(d["frames_waiting"]) <= 1  # at most the last frame, whose events never got completed
+    # the last frame, whose events and IMU samples past its stamp never come, went out once the inputs fell silent
+    assert int(d["frames_waiting"]) == 0, why
     assert len(run.statuses) == len(run.stamps) and run.probe.maps, "per-frame status or map missing"
     cloud = run.probe.maps[-1]
     assert cloud.width > 100 and cloud.header.frame_id == "odom" and [f.name for f in cloud.fields] == \
@@ -190,9 +193,48 @@ def _check_common(run: Run) -> None:
 
 
 def _ate(run: Run, gt: Trajectory) -> float:
-    ev = evaluate(gt, Trajectory(run.stamps, run.poses), EvalOptions(interpolate_gt=True),
-                  est_ok=np.array([s == "ok" for s in run.statuses]))
+    return _ate_of(run.stamps, run.poses, run.statuses, gt)
+
+
+def _ate_of(stamps: np.ndarray, poses: np.ndarray, statuses: list[str], gt: Trajectory) -> float:
+    ev = evaluate(gt, Trajectory(stamps, poses), EvalOptions(interpolate_gt=True),
+                  est_ok=np.array([s == "ok" for s in statuses]))
     return float(ev.metrics["ate_rmse_m"])
+
+
+def _inline_over_the_same_frames(bag: Path, tracked_ns: np.ndarray, gt: Trajectory) -> float:
+    """ATE of the replay's pipeline (mapping inline) fed only the frames the node tracked.
+
+    A node that cannot keep up drops frames at its queue (node.queue_size) and hands their events and IMU
+    samples on to the next frame (:meth:`FrameInput.after`); which frames go depends on the machine's
+    load (6 to 33 of 90 on this trot, idle machine), and so does the ATE (1.1-1.6 cm here, 1.7 in one CI
+    run against the full replay's 1.13). Dropping the same frames the same way in process leaves
+    asynchronous mapping as the one difference.
+    """
+    cfg = load_config("synthetic")
+    source = open_source([bag], None, cfg)
+    try:
+        cfg, rgb_cam, ev_cam = source.setup(cfg, [])
+        runtime = OdometryRuntime(cfg, rgb_cam, ev_cam, use_events=True)
+        inputs: list[FrameInput] = []
+        for _ in source.feed(runtime, ("rgb", "depth", "imu", "events"), None):
+            inputs.extend(runtime.pop_ready())
+        inputs.extend(runtime.flush_inputs())  # the node's end of stream
+    finally:
+        source.close()
+    kept = set(int(s) for s in tracked_ns)
+    stamps, poses, statuses, carried = [], [], [], None
+    for inp in inputs:
+        inp = inp.after(carried) if carried is not None else inp
+        if inp.stamp_ns not in kept:
+            carried = inp
+            continue
+        carried, out = None, runtime.process(inp)
+        stamps.append(out.result.stamp_ns)
+        poses.append(out.result.T_odom_base)
+        statuses.append(out.result.status.value)
+    assert stamps == sorted(kept), "the node tracked frames the replay's pipeline does not form"
+    return _ate_of(np.array(stamps, np.int64), np.stack(poses), statuses, gt)
 
 
 @pytest.mark.parametrize("scripts", [["atsvo_node"], ["mapping_node", "tracking_node"]], ids=["atsvo_node", "split"])
@@ -205,10 +247,11 @@ def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
     d = run.diag
     assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
     assert int(d["count_event_msgs"]) > 2900 and int(d.get("count_imu_late", 0)) == 0, d
-    assert int(d["frames_without_events"]) == int(d["late_events"]) == int(d.get("count_frames_without_imu", 0)) == 0, d
+    assert int(d["late_events"]) == int(d.get("count_frames_without_imu", 0)) == 0, d
+    assert int(d["frames_without_events"]) <= 1, d  # the last frame: the event stream ends before its stamp
     dp, dr = _pose_errors(run, replay)
     assert dp < 1e-3 and dr < 0.05, (dp, dr, json.dumps(d, sort_keys=True))
-    assert len(run.stamps) == len(replay.stamps_ns) - 1  # all but the last frame, which waits for more events
+    assert len(run.stamps) == len(replay.stamps_ns)  # the last frame too: it goes out once the inputs fall silent
     if scripts != ["atsvo_node"]:
         assert int(d["mapping_timeouts"]) == 0 and int(d["mapping_answers"]) == int(d["mapping_sent"]) > 3
     else:
@@ -217,16 +260,19 @@ def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
 
 @pytest.mark.parametrize("scripts", [["atsvo_node"], ["mapping_node", "tracking_node"]], ids=["atsvo_node", "split"])
 def test_asynchronous_nodes_are_as_accurate_as_the_replay(sequence, scripts):
-    """The default (PTAM: tracking goes on while mapping works): ATE within 50 % or 5 mm of the replay's."""
-    _, _, metrics, gt, _ = sequence
+    """The default (PTAM: tracking goes on while mapping works): ATE within 50 % or 5 mm of the replay's
+    pipeline over the frames the node tracked (those its queue dropped left out the same way)."""
+    bag, _, metrics, gt, _ = sequence
     run = _run_delivered(sequence, scripts, synchronous=False, queue_size=2, debug_images=scripts == ["atsvo_node"])
     _check_common(run)
     if scripts == ["atsvo_node"]:  # someone subscribes to the debug images: they come, one per frame or so
         ats, sel = run.probe.debug["ats"], run.probe.debug["selection"]
         assert len(ats) > 0.5 * len(run.stamps) and len(sel) > 0.5 * len(run.stamps)
         assert (ats[-1].encoding, sel[-1].encoding, ats[-1].width) == ("mono8", "rgb8", 80)
-    ate, ref = _ate(run, gt), metrics["ate_rmse_m"]
-    assert ate <= max(1.5 * ref, ref + 0.005), (ate, ref)
+    ate, ref = _ate(run, gt), _inline_over_the_same_frames(bag, run.stamps, gt)
+    d = run.diag
+    why = (ate, ref, metrics["ate_rmse_m"], {k: d[k] for k in ("queue_drops", "keyframes", "mapping") if k in d})
+    assert ate <= max(1.5 * ref, ref + 0.005), why
 
 
 def test_a_bad_parameter_file_stops_the_node_with_one_line(tmp_path):
