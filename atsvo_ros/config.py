@@ -348,7 +348,8 @@ class NodeConfig:
                                       "dvs_msgs/msg/EventArray", "dv_ros2_msgs/msg/EventArray"),
                              doc="message type on topics.events (libcaer_driver: EventPacket)")
     queue_size: int = _f(2, 1, 100, doc="frames waiting for the tracker; when full the oldest is dropped (counted) "
-                         "and its events and IMU samples go to the next, so the odometry stays fresh")
+                         "and its events and IMU samples go to the next, so the odometry stays fresh; with "
+                         "sensor_qos reliable and mapping.synchronous (loss-free) a full queue waits instead")
     sensor_qos: str = _f("best_effort", choices=("best_effort", "reliable"),
                          doc="QoS of the image, event and IMU subscriptions: best_effort (sensor data, keep last: "
                              "matches any publisher, a late message is dropped, never waited for; the robot) or "

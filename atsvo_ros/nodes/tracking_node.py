@@ -74,6 +74,8 @@ _CLASSES = MsgClasses(Time, Header, OdometryMsg, PoseWithCovariance, Pose, Point
                       Twist, Vector3, TransformStamped, Transform)
 
 #: status -> diagnostic level of the per-frame status message (see the README)
+#: Loss-free mode's queue: 10 s of frames at 30 Hz (2 MB each at 640x480) before the oldest would be dropped.
+LOSS_FREE_QUEUE = 300
 STATUS_LEVEL = {"ok": OK, "initialising": WARN, "degraded": WARN, "relocalised": WARN, "reinitialised": WARN,
                 "lost": ERROR}
 
@@ -112,7 +114,13 @@ class TrackingNode(Node):
         # arrival clock: a stream is stalled when silent, not merely behind (backlogs drain unevenly)
         self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=make_core,
                                        clock=time.monotonic_ns)
-        self.queue: DropOldestQueue[FrameInput] = DropOldestQueue(nc.queue_size, merge=lambda old, new: new.after(old))
+        # loss-free mode (reliable inputs, synchronous mapping: every frame must count, as in the replay): the queue
+        # holds a backlog of LOSS_FREE_QUEUE frames instead of node.queue_size. It cannot block: the default
+        # executor is single-threaded, and a blocked sensor callback would starve the map snapshots it waits for.
+        self.loss_free = nc.sensor_qos == "reliable" and cfg.mapping.synchronous
+        self.queue: DropOldestQueue[FrameInput] = DropOldestQueue(
+            max(nc.queue_size, LOSS_FREE_QUEUE) if self.loss_free else nc.queue_size,
+            merge=lambda old, new: new.after(old))
         self.worker: Worker[FrameInput] = Worker(self.queue, self._process, "atsvo-tracking", self._worker_failed)
 
         # ---- outputs
@@ -171,7 +179,8 @@ class TrackingNode(Node):
                  f"{', synchronous' if cfg.mapping.synchronous else ''}; in: {topics.rgb}, {topics.depth}"
                  f"{', ' + topics.events + ' (' + nc.event_msg_type + ')' if use_events else ''}"
                  f"{', ' + topics.imu if nc.use_imu else ''}; out: {topics.odometry}, {topics.status}, "
-                 f"TF {self.tf_route}; queue {nc.queue_size} (drop oldest); sensor QoS {nc.sensor_qos}")
+                 f"TF {self.tf_route}; queue {self.queue.maxsize} "
+                 f"({'loss-free: nothing dropped' if self.loss_free else 'drop oldest'}); sensor QoS {nc.sensor_qos}")
 
     # ------------------------------------------------------------------ setup helpers
     def _tf_publisher(self) -> tuple[Callable[[Any], None] | None, str]:
@@ -368,6 +377,7 @@ class TrackingNode(Node):
             "frames_in": self.frames_in, "frames_out": self.frames_out, "frames_waiting": rt.frames_waiting,
             "queue_drops": self.queue.n_dropped,
             "queue_length": len(self.queue), "queue_size": self.queue.maxsize,
+            "queue_mode": "loss-free" if self.loss_free else "drop oldest",
             "decoder_drops": sum(s["dropped_messages"] + s["dropped_out_of_range"] + s["dropped_backwards"]
                                  for s in dec.values()),
             "sync_dropped_rgb": sync.dropped_rgb, "sync_dropped_depth": sync.dropped_depth,

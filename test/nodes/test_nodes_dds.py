@@ -239,12 +239,14 @@ def _inline_over_the_same_frames(bag: Path, tracked_ns: np.ndarray, gt: Trajecto
 
 @pytest.mark.parametrize("scripts", [["atsvo_node"], ["mapping_node", "tracking_node"]], ids=["atsvo_node", "split"])
 def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
-    """mapping.synchronous + a queue that never drops: the node's odometry is the replay's, pose for pose."""
+    """Loss-free mode (reliable inputs, mapping.synchronous): node.queue_size 2 gives way to a backlog that drops
+    nothing, and the node's odometry is the replay's, pose for pose."""
     _, replay, *_ = sequence
-    run = _run_delivered(sequence, scripts, synchronous=True, queue_size=100, check_reset=scripts == ["atsvo_node"],
+    run = _run_delivered(sequence, scripts, synchronous=True, queue_size=2, check_reset=scripts == ["atsvo_node"],
                          reliable=True)
     _check_common(run)
     d = run.diag
+    assert d["queue_mode"] == "loss-free", d
     assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
     assert int(d["count_event_msgs"]) > 2900 and int(d.get("count_imu_late", 0)) == 0, d
     assert int(d["late_events"]) == int(d.get("count_frames_without_imu", 0)) == 0, d
