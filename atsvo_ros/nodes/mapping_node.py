@@ -37,6 +37,7 @@ from atsvo_ros.nodes._ros import (
     uint8_array,
 )
 from atsvo_ros.runtime.mapping_remote import MappingServer
+from atsvo_ros.runtime.warmup import warm_up
 
 
 class MappingNode(Node):
@@ -54,7 +55,9 @@ class MappingNode(Node):
         self.last_snapshot: MapSnapshot | None = None
         self.insert_ms = Window()
         self.server: MappingServer | None = None
-        if serve:
+        if serve:  # in atsvo_node the tracking node's warm-up ran the mapper already
+            warm = warm_up(cfg, use_events=cfg.mode == "fused")
+            self.get_logger().info(f"warm-up: mapping's kernels ready in {warm.seconds:.2f} s")
             self.server = MappingServer(cfg, logger=self._log)
             self.snapshot_pub = self.create_publisher(UInt8MultiArray, topics.map_snapshots, LATCHED_QOS)
             self.create_subscription(UInt8MultiArray, topics.keyframe_requests, self._on_request, REQUEST_QOS,

@@ -69,6 +69,7 @@ from atsvo_ros.runtime.frame_queue import DropOldestQueue, Worker
 from atsvo_ros.runtime.mapping_remote import RemoteMapping, mapping_digest
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.runtime.types import FrameInput, RuntimeOutput
+from atsvo_ros.runtime.warmup import warm_up
 
 _CLASSES = MsgClasses(Time, Header, OdometryMsg, PoseWithCovariance, Pose, Point, Quaternion, TwistWithCovariance,
                       Twist, Vector3, TransformStamped, Transform)
@@ -106,6 +107,11 @@ class TrackingNode(Node):
             if self.event_class is None:
                 log.warn(f"events off: {why}; running RGB-D only")
                 use_events = False
+
+        # ---- warm-up before subscribing: no real frame pays for compiling (or loading) the numba kernels
+        warm = warm_up(cfg, use_events=use_events)
+        log.info(f"warm-up: the odometry ran {len(warm.statuses)} synthetic frames in {warm.seconds:.2f} s "
+                 f"({'/'.join(sorted(set(warm.modes)))}); ready, subscribing")
 
         def make_core(config, rgb_camera, event_camera=None):
             return Odometry(config, rgb_camera, event_camera, mapping=self._make_mapping_port)
