@@ -45,8 +45,11 @@ class CameraConfig:
     use_camera_info: bool = _f(True, doc="prefer the camera_info topic over these values")
     readout_time_s: float = _f(0.0, 0.0, 1.0, doc="rolling-shutter readout time, first to last row (0 = global "
                                "shutter, e.g. the D455's colour and depth imagers)")
-    time_offset_s: float = _f(0.0, -1.0, 1.0, doc="exposure time of the middle row minus the image stamp (a "
-                              "host-stamping driver's latency, negative); the odometry is stamped at that time")
+    time_offset_s: float = _f(0.0, -1e4, 1e4, doc="colour camera: exposure time of the middle row minus the image "
+                              "stamp (a host-stamping driver's latency, negative); the odometry is stamped at that "
+                              "time. Event camera: added to the event times (and event message stamps) to put them "
+                              "on the colour images' clock, e.g. -5.0 for events stamped 5 s ahead (a camera on "
+                              "another clock; the run says so at its start and names the value)")
     frame_clock_frames: int = _f(30, 0, 10000, doc="frames of the line fitted to the image stamps to recover the "
                                  "camera's frame clock from host-stamp jitter (0 = use the stamps as they are)")
 
@@ -63,6 +66,8 @@ class RigConfig:
     depth_min_m: float = _f(0.3, 0.0, 100.0)
     depth_max_m: float = _f(6.0, 0.0, 1000.0, lo_open=True)
     sync_tolerance_s: float = _f(0.01, 0.0, 1.0, doc="max RGB/depth stamp difference for a pair")
+    imu_time_offset_s: float = _f(0.0, -1e4, 1e4, doc="added to the IMU stamps to put them on the colour images' "
+                                  "clock (an IMU on another clock; the run says so at its start and names the value)")
     depth_time_offset_s: float = _f(0.0, -0.1, 0.1,
                                     doc="depth exposure centre minus colour exposure centre, for a depth image "
                                         "registered to colour and stamped with it: a D455 cannot synchronise the "

@@ -11,6 +11,7 @@ Python objects) by the stateful decoder of :mod:`atsvo_ros.io.decode`.
 from __future__ import annotations
 
 import logging
+import struct
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, fields
@@ -27,6 +28,7 @@ from atsvo_ros.errors import BagError, TransformError
 from atsvo_ros.io.decode import EventDecoder
 from atsvo_ros.io.msgtypes import EVENT_MSGTYPES, register_event_types, typestore
 from atsvo_ros.io.read_report import ReadReport, container_errors, describe, iter_messages
+from atsvo_ros.io.restamp import cdr_stamp_ns
 
 _log = logging.getLogger(__name__)
 
@@ -72,6 +74,17 @@ class BagMessage:
     log_time_ns: int
     msg: Any = None
     events: Any = None
+    stamp_ns: int | None = None  #: header stamp of an event message (None when it has none)
+
+
+def _raw_stamp_ns(raw: bytes | bytearray | memoryview, ros_version: int) -> int | None:
+    """header.stamp of a serialized message with a header first (ROS 2 CDR, or ROS 1: seq, sec, nsec)."""
+    if ros_version == 2:
+        return cdr_stamp_ns(raw)
+    if len(raw) < 12:
+        return None
+    sec, nsec = struct.unpack_from("<II", raw, 4)
+    return sec * 1_000_000_000 + nsec
 
 
 # ---------------------------------------------------------------------------- opening
@@ -388,7 +401,8 @@ class Bag:
                 if dec.stats.dropped_messages != dropped:
                     report.topic(conn.topic).undecodable += 1
                     continue
-                yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns), events=events)
+                yield BagMessage(role, conn.topic, conn.msgtype, int(t_ns), events=events,
+                                 stamp_ns=_raw_stamp_ns(raw, self.ros_version))
             else:
                 msg = self._deserialize(conn, t_ns, raw, report)
                 if msg is not None:

@@ -151,7 +151,7 @@ class BagSource:
             elif m.role == "depth":
                 sink.add_depth_msg(m.msg, m.topic)
             elif m.role == "events":
-                sink.add_events(m.events)
+                sink.add_events(m.events, m.stamp_ns)
             elif m.role == "imu":
                 sink.add_imu_msg(m.msg, m.topic)
             elif m.role == "ground_truth":

@@ -94,8 +94,9 @@ class StampGaps:
 class FrameAssembler:
     """Incremental RGB/depth pairing and event cutting (see the module docstring)."""
 
-    #: Data this far behind the newest stamp seen is a clock jump (a bag loop, a simulator restart): the
-    #: assembler starts over instead of calling everything that follows late.
+    #: Data this far behind the newest stamp of its own stream (images, or events) is a clock jump (a bag
+    #: loop, a simulator restart): the assembler starts over instead of calling everything that follows
+    #: late. Two streams this far apart are on different clocks, not jumping (the runtime says so).
     CLOCK_JUMP_NS = 1_000_000_000
 
     def __init__(self, rig: RigConfig, with_events: bool = True, max_event_wait_s: float = 0.25,
@@ -121,6 +122,8 @@ class FrameAssembler:
         self._events_heard_ns: int | None = None  # arrival time (``clock``) of the last event message
         self._last_cut_ns: int | None = None
         self._newest_ns = -(2**63)
+        # per stream: a clock jump is a stream's own stamps going back, not two streams on different clocks
+        self._newest_img_ns = self._newest_ev_ns = -(2**63)
         self._gaps_rgb, self._gaps_depth = StampGaps(self.CLOCK_JUMP_NS), StampGaps(self.CLOCK_JUMP_NS)
 
     # ------------------------------------------------------------------ input
@@ -153,8 +156,10 @@ class FrameAssembler:
         """Events in time order; ``complete_to_ns`` (e.g. the message stamp) says the stream reached it."""
         if self.clock is not None:
             self._events_heard_ns = self.clock()
-        if len(batch) and batch.t_first_ns < self._newest_ns - self.CLOCK_JUMP_NS:
+        if len(batch) and batch.t_first_ns < self._newest_ev_ns - self.CLOCK_JUMP_NS:
             self._restart_clock()
+        if len(batch):
+            self._newest_ev_ns = max(self._newest_ev_ns, batch.t_last_ns)
         if len(batch):
             if self._last_cut_ns is not None and batch.t_first_ns <= self._last_cut_ns:
                 late = batch.t <= self._last_cut_ns
@@ -234,12 +239,13 @@ class FrameAssembler:
         self._n_events = 0
         self._event_mark_ns = None
         self._last_cut_ns = None
-        self._newest_ns = -(2**63)
+        self._newest_ns = self._newest_img_ns = self._newest_ev_ns = -(2**63)
 
     def _insert(self, q: deque, t: int, img: np.ndarray) -> None:
-        if t < self._newest_ns - self.CLOCK_JUMP_NS:
+        if t < self._newest_img_ns - self.CLOCK_JUMP_NS:
             self._restart_clock()
         self._newest_ns = max(self._newest_ns, t)
+        self._newest_img_ns = max(self._newest_img_ns, t)
         if q and q[-1][0] > t:  # out of order: keep the queue sorted
             items = sorted([*q, (t, img)], key=lambda x: x[0])
             q.clear()

@@ -414,6 +414,11 @@ class TrackingNode(Node):
         message = status if status != "-" else "waiting for frames"
         if v["reason"]:
             message += f": {v['reason']}"
+        clocks = [self.runtime.first_problem[k] for k in ("clock_events", "clock_imu")
+                  if k in self.runtime.first_problem]
+        if clocks:  # a stream on another clock: no frame gets it until the offset is set
+            level = ERROR
+            message += "; " + "; ".join(clocks)
         self.diag_pub.publish(diagnostic_array(self, [(f"{self.get_name()}: odometry", level, message, v)]))
 
     def close(self) -> None:

@@ -44,9 +44,11 @@ from atsvo_ros.core.frame import RgbdFrame
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.core.odometry.odometry import Odometry
 from atsvo_ros.errors import AtsvoError
+from atsvo_ros.io.images import stamp_ns as msg_stamp_ns
 from atsvo_ros.io.imu import imu_from_msg
 from atsvo_ros.io.ros_out import body_twist
 from atsvo_ros.io.sync import FrameAssembler
+from atsvo_ros.runtime.clock_check import ClockCheck, EventClock
 from atsvo_ros.runtime.ingest import EventIngest, stamp_text
 from atsvo_ros.runtime.problems import ProblemLog
 from atsvo_ros.runtime.release import FrameRelease
@@ -65,6 +67,9 @@ class OdometryRuntime:
     MAX_HELD_EVENT_MSGS = 2000
     #: IMU samples kept waiting for a frame (a stream without frames does not grow memory).
     IMU_KEEP_NS = 2_000_000_000
+    #: Without an arrival clock (a replay), how far in stamp time the images may run ahead of the event
+    #: stream before a frame goes without its events: event messages logged up to this late still count.
+    REPLAY_EVENT_WAIT_S = 1.5
 
     def __init__(self, config: AtsvoConfig, rgb_camera: CameraModel | None = None,
                  event_camera: CameraModel | None = None, *, use_events: bool | None = None,
@@ -83,14 +88,19 @@ class OdometryRuntime:
         self._events = EventIngest(config, event_camera if event_camera is not None else (
             None if config.event_camera.use_camera_info else CameraModel.from_config(config.event_camera)),
             self.add_events, self._problems, max_held_msgs=self.MAX_HELD_EVENT_MSGS)
-        # events waiting for their frame: at most what the core would fold in over the assembler's wait
-        wait_s = 0.25
+        # events waiting for their frame: at most what the core would fold in over the assembler's wait. A
+        # replay (no arrival clock) has no deadline: it waits longer for event messages logged late
+        wait_s = 0.25 if clock is not None else self.REPLAY_EVENT_WAIT_S
         self.assembler = FrameAssembler(config.rig, with_events=self.use_events, max_event_wait_s=wait_s,
+                                        max_pending=max(30, int(round(wait_s * 60))),  # frames of up to 60 Hz
                                         max_buffered_events=int(config.fusion.max_event_rate_ev_s * wait_s),
                                         clock=clock)
         self._release = FrameRelease(config, self.assembler, self._problems, clock=clock,
                                      clock_jump_s=self.CLOCK_JUMP_S, imu_keep_ns=self.IMU_KEEP_NS,
                                      max_held_frames=self.MAX_HELD_FRAMES)
+        self._clocks = ClockCheck(self._problems)
+        self._event_clock = EventClock(config.event_camera.time_offset_s, self._problems)
+        self._imu_offset_ns = int(round(config.rig.imu_time_offset_s * 1e9))
         self.core: OdometryCore | None = None
         self._last_out: tuple[int, np.ndarray] | None = None
         self._last_stamp: int | None = None
@@ -128,6 +138,7 @@ class OdometryRuntime:
     def add_rgb(self, stamp_ns: int, image: np.ndarray) -> None:
         """A colour image (H, W, 3 RGB uint8, or grey) at its stamp."""
         self.assembler.add_rgb(int(stamp_ns), image)
+        self._clocks.image(int(stamp_ns))
 
     def add_depth(self, stamp_ns: int, depth_m: np.ndarray) -> None:
         """A depth image in float32 metres (0 / NaN = invalid) aligned to the colour image."""
@@ -139,6 +150,8 @@ class OdometryRuntime:
             self.assembler.add_rgb_msg(msg)
         except AtsvoError as exc:
             self._problems.report("images_rejected", f"{topic}: image at {stamp_text(msg)} skipped: {exc}")
+            return
+        self._clocks.image(msg_stamp_ns(msg))
 
     def add_depth_msg(self, msg: Any, topic: str = "depth") -> None:
         """Depth image message (16UC1 scaled by ``rig.depth_scale_m``, or 32FC1 metres); bad ones are counted."""
@@ -148,9 +161,13 @@ class OdometryRuntime:
             self._problems.report("images_rejected", f"{topic}: depth image at {stamp_text(msg)} skipped: {exc}")
 
     def add_events(self, batch: EventBatch, complete_to_ns: int | None = None) -> None:
-        """A decoded, time-ordered event batch (``complete_to_ns``: the stream is known complete up to here)."""
+        """A decoded, time-ordered event batch; ``complete_to_ns``: its message's header stamp (the stream is
+        known complete up to there). The times are put on the colour images' clock first (:class:`EventClock`)."""
         if self.use_events:
             self.counters["events"] += len(batch)
+            batch, complete_to_ns = self._event_clock.place(batch, complete_to_ns)
+            if len(batch):
+                self._clocks.stream("events", batch.t_last_ns)
             self.assembler.add_events(batch, complete_to_ns=complete_to_ns)
 
     def add_event_msg(self, msg: Any, msgtype: str, topic: str = "events") -> None:
@@ -162,8 +179,13 @@ class OdometryRuntime:
         """IMU samples (time order); each frame takes those up to its exposure time to predict its rotation.
 
         Samples at or before a frame that was already handed out are late: dropped and counted (unless
-        the clock jumped back by more than :attr:`CLOCK_JUMP_S`: then the stream starts over).
+        the clock jumped back by more than :attr:`CLOCK_JUMP_S`: then the stream starts over). The stamps
+        are moved by ``rig.imu_time_offset_s`` first.
         """
+        if self._imu_offset_ns and len(batch):
+            batch = ImuBatch(batch.stamps_ns + self._imu_offset_ns, batch.gyro_rad_s, batch.accel_m_s2)
+        if len(batch):
+            self._clocks.stream("imu", batch.t_last_ns)
         self._release.add_imu(batch)
 
     def add_imu_msg(self, msg: Any, topic: str = "imu") -> None:

@@ -200,7 +200,9 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
                        f"{sync_stats['dropped_depth']} depth images"
                        + (f"; {runtime.counters['images_rejected']} images could not be decoded, first: {first})"
                           if first else ")"))
-    used_mode = "fused" if use_events else "rgbd"
+    used_mode = "fused" if use_events and any(o.n_events for o in outputs) else "rgbd"
+    if use_events and used_mode == "rgbd":
+        notes.append("warning: RGB-D only: the bag has events, but not one reached a frame (see the warnings)")
     results = [o.result for o in outputs]
     statuses = [r.status.value for r in results]
     result = ReplayResult(out, used_mode, np.array([r.stamp_ns for r in results], np.int64),
@@ -272,8 +274,14 @@ def _counter_notes(runtime: Any) -> list[str]:
               "frames_waiting_camera_info": "frames before the first camera_info",
               "events_dropped": "events dropped by the event-rate cap (flood)"}
     counters = runtime.counters
-    return [f"{counters[k]} {v} (first: {runtime.first_problem.get(k, '?')})" for k, v in labels.items()
-            if counters.get(k)]
+    clocks = [f"warning: {runtime.first_problem[k]}" for k in ("events_on_camera_clock", "clock_events", "clock_imu")
+              if counters.get(k)]
+    late = runtime.assembler.stats.late_events
+    if late:
+        clocks.append(f"warning: {late} events arrived after their frame had gone (logged more than "
+                      f"{runtime.REPLAY_EVENT_WAIT_S:g} s after the images of their time) and were dropped")
+    return clocks + [f"{counters[k]} {v} (first: {runtime.first_problem.get(k, '?')})" for k, v in labels.items()
+                     if counters.get(k)]
 
 
 def _main(args: argparse.Namespace) -> int:

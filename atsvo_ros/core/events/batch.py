@@ -69,6 +69,10 @@ class EventBatch:
         """Sub-batch by boolean mask, index array or slice."""
         return EventBatch(self.x[mask], self.y[mask], self.t[mask], self.p[mask], self.width, self.height)
 
+    def shifted(self, dt_ns: int) -> EventBatch:
+        """The same events ``dt_ns`` later (onto another clock)."""
+        return EventBatch(self.x, self.y, self.t + np.int64(dt_ns), self.p, self.width, self.height)
+
     def time_slice(self, t_start_ns: int, t_end_ns: int) -> EventBatch:
         """Events with ``t_start_ns <= t < t_end_ns`` (binary search, so the batch must be sorted)."""
         i0, i1 = np.searchsorted(self.t, [t_start_ns, t_end_ns], side="left")
