@@ -95,6 +95,7 @@ setup(
             "atsvo-sim = atsvo_ros.tools.sim:main",
             "atsvo-events = atsvo_ros.tools.events:main",
             "atsvo-bench = atsvo_ros.bench.cli:main",
+            "atsvo-play = atsvo_ros.nodes.play:main",
         ],
     },
 )

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import typing
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -561,6 +562,25 @@ def ros_parameters(document: dict[str, Any], node_name: str | None = None) -> di
     return merged
 
 
+def parse_overrides(pairs: Sequence[str]) -> dict[str, object]:
+    """``['ats.tau_u_s=0.05']`` -> ``{'ats.tau_u_s': 0.05}`` (the command lines' ``--set``; values are YAML).
+
+    Raises:
+        ConfigError: A pair without ``=`` or a value that is not valid YAML.
+    """
+    out: dict[str, object] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--set expects KEY=VALUE, got {pair!r}")
+        try:
+            out[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--set {pair!r}: the value is not valid YAML "
+                              f"({str(exc).splitlines()[0]})") from exc
+    return out
+
+
 def load_config(path: str | Path | None = None, node_name: str | None = None,
                 overrides: dict[str, Any] | None = None) -> AtsvoConfig:
     """Load a ROS-parameter YAML (or a bundled preset name such as ``mini_cheetah``) into a config.
@@ -628,4 +648,4 @@ def resolve_config_path(path: str | Path) -> Path:
 
 __all__ = ["AtsConfig", "AtsvoConfig", "CameraConfig", "EventSelectionConfig", "FusionConfig", "MappingConfig",
            "NodeConfig", "RgbSelectionConfig", "RigConfig", "TopicsConfig", "TrackerConfig", "config_from_dict",
-           "flatten", "load_config", "ros_parameters", "unflatten"]
+           "flatten", "load_config", "parse_overrides", "ros_parameters", "unflatten"]

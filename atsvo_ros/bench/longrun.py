@@ -27,12 +27,12 @@ import numpy as np
 from tqdm import tqdm
 
 from atsvo_ros.bench.tracking import FRAME_CACHE_VERSION
-from atsvo_ros.config import load_config
+from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.eval.metrics import EvalOptions, evaluate
 from atsvo_ros.io.trajectory import Trajectory
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.sim.sequence import SequenceSpec, make_simulation
-from atsvo_ros.tools._cli import add_config_args, parse_overrides
+from atsvo_ros.tools._cli import add_config_args
 from atsvo_ros.tools.demo import cache_dir
 
 MINUTE_NS = 60_000_000_000

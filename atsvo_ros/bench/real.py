@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from atsvo_ros.config import load_config
+from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.odometry.odometry import Odometry
 from atsvo_ros.errors import ConfigError
@@ -49,7 +49,6 @@ from atsvo_ros.eval.peers import run_open3d
 from atsvo_ros.io.images import depth_to_metres
 from atsvo_ros.io.trajectory import Trajectory, write_tum
 from atsvo_ros.io.tum_rgbd import TumRgbdReader, TumSource
-from atsvo_ros.tools._cli import parse_overrides
 from atsvo_ros.tools.replay import replay
 
 DEFAULT_FOLDER = Path(__file__).resolve().parents[2].parent / "shared" / "realdata" / "tum_rgbd_fr1_rpy_300"

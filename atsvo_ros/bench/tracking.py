@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from atsvo_ros.config import load_config
+from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.eval.metrics import EvalOptions, errors_by_label, evaluate
@@ -37,7 +37,7 @@ from atsvo_ros.sim.motion import PHASES
 from atsvo_ros.sim.rgbd import DepthModel
 from atsvo_ros.sim.sequence import SequenceSpec, make_simulation, model_key
 from atsvo_ros.sim.stereo import StereoModel
-from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
+from atsvo_ros.tools._cli import add_config_args, run
 from atsvo_ros.tools.demo import cache_dir
 
 #: Bump when the cache's layout changes (the simulator's own changes are in :func:`model_key`).

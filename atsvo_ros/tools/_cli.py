@@ -5,9 +5,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-import yaml
-
-from atsvo_ros.errors import AtsvoError, ConfigError
+from atsvo_ros.errors import AtsvoError
 
 
 def run(main: Callable[[argparse.Namespace], int | None], parser: argparse.ArgumentParser,
@@ -37,14 +35,3 @@ def add_config_args(parser: argparse.ArgumentParser, default: str | None = None)
                         help="override one parameter, e.g. --set ats.tau_u_s=0.05 (YAML value syntax)")
 
 
-def parse_overrides(pairs: Sequence[str]) -> dict[str, object]:
-    """``['ats.tau_u_s=0.05']`` -> ``{'ats.tau_u_s': 0.05}`` (values parsed as YAML scalars)."""
-
-
-    out: dict[str, object] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise ConfigError(f"--set expects KEY=VALUE, got {pair!r}")
-        out[key.strip()] = yaml.safe_load(value)
-    return out

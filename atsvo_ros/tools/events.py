@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from atsvo_ros.config import load_config
+from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.io.event_files import open_events
-from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
+from atsvo_ros.tools._cli import add_config_args, run
 from atsvo_ros.tools.events_render import render_figures
 
 STATS_KEYS = ("width", "height", "encoding", "n_events", "n_on", "n_off", "t_first_ns", "t_last_ns", "duration",

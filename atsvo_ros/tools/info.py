@@ -11,10 +11,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from atsvo_ros.config import flatten, load_config
+from atsvo_ros.config import flatten, load_config, parse_overrides
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.geometry import rotation_angle_rad
-from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
+from atsvo_ros.tools._cli import add_config_args, run
 from atsvo_ros.tools._environment import describe
 
 

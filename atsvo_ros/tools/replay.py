@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from atsvo_ros.config import AtsvoConfig, config_dir, load_config
+from atsvo_ros.config import AtsvoConfig, config_dir, load_config, parse_overrides
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.errors import BagError, ConfigError, TrackingError
 from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics
@@ -38,7 +38,7 @@ from atsvo_ros.io.record import BagRecorder, check_record_path
 from atsvo_ros.io.sources import detect_preset, open_source
 from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
 from atsvo_ros.runtime.runtime import OdometryRuntime
-from atsvo_ros.tools._cli import add_config_args, parse_overrides, run
+from atsvo_ros.tools._cli import add_config_args, run
 
 TOPIC_FLAGS = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")
 

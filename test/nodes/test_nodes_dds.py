@@ -33,7 +33,14 @@ from atsvo_ros.core.geometry import so3_log  # noqa: E402
 from atsvo_ros.eval.metrics import EvalOptions, evaluate  # noqa: E402
 from atsvo_ros.io.sources import open_source  # noqa: E402
 from atsvo_ros.io.trajectory import Trajectory, read_tum  # noqa: E402
-from atsvo_ros.nodes.player import BagPlayer, OdometryProbe, Played, console_script, node_session  # noqa: E402
+from atsvo_ros.nodes.player import (  # noqa: E402
+    BagPlayer,
+    NodeProcesses,
+    OdometryProbe,
+    Played,
+    console_script,
+    node_session,
+)
 from atsvo_ros.runtime import FrameInput, OdometryRuntime  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -275,6 +282,23 @@ def test_asynchronous_nodes_are_as_accurate_as_the_replay(sequence, scripts):
     d = run.diag
     why = (ate, ref, metrics["ate_rmse_m"], {k: d[k] for k in ("queue_drops", "keyframes", "mapping") if k in d})
     assert ate <= max(1.5 * ref, ref + 0.005), why
+
+
+def test_atsvo_play_feeds_a_running_node_and_records_its_odometry(sequence, tmp_path):
+    """The no-ROS-install way: atsvo_node in one process, atsvo-play BAG --tum in another (same domain)."""
+    bag, replay, *_ = sequence
+    procs = NodeProcesses(["atsvo_node"], ["--ros-args", "--params-file", str(PARAMS)], tmp_path / "logs")
+    try:
+        done = subprocess.run([console_script("atsvo-play"), str(bag), "--config", "synthetic", "--tum",
+                               str(tmp_path / "odom.tum"), "--wait-s", str(START_TIMEOUT_S)],
+                              capture_output=True, text=True, timeout=300)
+    finally:
+        codes = procs.stop()
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "odometry received" in done.stdout and codes == [0], (done.stdout, codes)
+    got = read_tum(tmp_path / "odom.tum")
+    assert len(got.stamps_ns) >= 0.8 * len(replay.stamps_ns)  # best effort on a loaded machine may lose some
+    assert set(got.stamps_ns.tolist()) <= set(replay.stamps_ns.tolist())
 
 
 def test_a_bad_parameter_file_stops_the_node_with_one_line(tmp_path):
