@@ -13,7 +13,11 @@ clock) to its odometry at the subscriber, p50/p99/max; frames dropped by the nod
 by DDS (published, never received) and still waiting; the node processes' resident memory over time
 (first, last, max, and the slope over the second half; the series in the JSON and a plot beside it).
 ``--repeat N`` loops the sequence in the load runs with time running on: a soak test from a short
-bag. Needs the ``ros`` extra and the event messages (.ci/ros_env.sh); the simulated sequence is
+bag. ``--hogs N`` runs N busy-loop processes beside the nodes in every run (the robot's other
+software); ``--loads`` with no value keeps only the run at the recording's own rate. Each single-pass
+run also reports the share of frames answered and the ATE of the odometry the probe received against
+the sequence's ground truth, beside ``atsvo-replay``'s on the same bag. Needs the ``ros`` extra
+and the event messages (.ci/ros_env.sh); the simulated sequence is
 cached in ``$ATSVO_CACHE``.
 """
 from __future__ import annotations
@@ -21,7 +25,11 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import subprocess
+import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -29,8 +37,11 @@ import numpy as np
 
 from atsvo_ros.config import load_config, resolve_config_path
 from atsvo_ros.errors import AtsvoError
+from atsvo_ros.eval.metrics import EvalOptions, evaluate
 from atsvo_ros.eval.plots import plot_memory
+from atsvo_ros.io.trajectory import Trajectory, read_tum
 from atsvo_ros.tools.demo import cache_dir
+from atsvo_ros.tools.replay import replay
 from atsvo_ros.tools.sim import main as sim_main
 
 
@@ -42,8 +53,11 @@ def add_nodes_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--width", type=int, default=640, help="colour image width (default 640, the D455's)")
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--event-scale", type=float, default=1.0, help="event camera size factor (1: 320x240)")
-    p.add_argument("--loads", type=float, nargs="+", default=[1.0, 3.0],
-                   help="publishing rates as multiples of the sustainable frame rate (default 1 3)")
+    p.add_argument("--loads", type=float, nargs="*", default=[1.0, 3.0],
+                   help="publishing rates as multiples of the sustainable frame rate (default 1 3; none: only the "
+                        "run at the recording's own rate)")
+    p.add_argument("--hogs", type=int, default=0,
+                   help="busy-loop processes running beside the nodes in every run (default 0)")
     p.add_argument("--split", action="store_true", help="tracking_node + mapping_node instead of atsvo_node")
     p.add_argument("--queue-size", type=int, default=2, help="node.queue_size (default 2)")
     p.add_argument("--mode", choices=("fused", "rgbd"), default="fused")
@@ -80,15 +94,29 @@ def _sequence(args: argparse.Namespace) -> Path:
     return out
 
 
-def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path, repeat: int = 1) -> dict[str, Any]:
+@contextmanager
+def _hogs(n: int) -> Iterator[None]:
+    """``n`` processes spinning a core each (what else runs on the robot), stopped on exit."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(max(0, n))]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path, repeat: int = 1,
+         gt: Trajectory | None = None) -> dict[str, Any]:
     """One run: start the nodes, publish ``repeat`` passes at ``rate`` x real time, measure, stop."""
     from atsvo_ros.nodes.player import node_session  # needs rclpy (the ros extra)
 
-    cfg = load_config("synthetic")
+    cfg = load_config("synthetic", overrides={"mode": args.mode})
     scripts = ["mapping_node", "tracking_node"] if args.split else ["atsvo_node"]
     ros_args = ["--ros-args", "--params-file", str(_params_file()), "-p", f"node.queue_size:={args.queue_size}",
                 "-p", f"mode:={args.mode}", "-p", "node.diagnostics_period_s:=0.5"]
-    with node_session(bag, cfg, scripts, ros_args, log_dir, start_timeout_s=120.0, name="atsvo_bench_probe") as run:
+    with _hogs(args.hogs), node_session(bag, cfg, scripts, ros_args, log_dir, start_timeout_s=120.0,
+                                        name="atsvo_bench_probe") as run:
         player, probe, procs = run.player, run.probe, run.procs
         t_start = time.monotonic()
         played = player.play(rate=rate, event_packet_wall_s=args.event_packet_ms * 1e-3, repeat=repeat)
@@ -99,7 +127,13 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path, repeat
         diag = probe.diag("atsvo_tracking: odometry") or {}
         received = probe.received()
         statuses = probe.statuses()
+        stamps, poses = probe.poses()
     codes = run.exit_codes
+    ate = None
+    if gt is not None and repeat == 1 and len(stamps) > 2 and len(statuses) == len(stamps):
+        ev = evaluate(gt, Trajectory(stamps, poses), EvalOptions(interpolate_gt=True),
+                      est_ok=np.array([s == "ok" for s in statuses]))
+        ate = float(ev.metrics["ate_rmse_m"])
     lat = np.array([(tr - played.scheduled_s[m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec]) * 1e3
                     for tr, m in received if (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
                     in played.scheduled_s])
@@ -116,6 +150,7 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path, repeat
         "scheduled_fps": (n_frames - 1) / max(span_s / rate, 1e-9),
         "publisher_lag_ms_p99": float(np.percentile(played.lag_s, 99) * 1e3),
         "odometry": len(received), "odometry_fps": len(received) / max(t_played - t_start, 1e-9),
+        "answered": len(received) / max(n_frames, 1), "hogs": args.hogs, "ate_m": ate,
         "latency_ms_p50": float(np.percentile(lat, 50)) if len(lat) else None,
         "latency_ms_p99": float(np.percentile(lat, 99)) if len(lat) else None,
         "latency_ms_max": float(lat.max()) if len(lat) else None,
@@ -143,8 +178,10 @@ def _row(name: str, r: dict[str, Any]) -> str:
     def f(v: Any, fmt: str) -> str:
         return "-" if v is None else format(v, fmt)
 
+    ate = "-" if r.get("ate_m") is None else f"{r['ate_m'] * 100:.2f}"
     return (f"| {name} | {r['rate_x_real_time']:.2f} | {r['scheduled_fps']:.0f} / {r['publish_fps']:.0f} | "
-            f"{r['odometry']}/{r['published_frames']} | {f(r['latency_ms_p50'], '.0f')} / "
+            f"{r['odometry']}/{r['published_frames']} ({100 * r['answered']:.0f} %) | {ate} | "
+            f"{f(r['latency_ms_p50'], '.0f')} / "
             f"{f(r['latency_ms_p99'], '.0f')} / {f(r['latency_ms_max'], '.0f')} | {r['queue_drops']} | "
             f"{r['dds_lost_frames']} | {r['event_msgs_decoded']}/{r['event_msgs_published']} | "
             f"{f(r['rss_mb_first'], '.0f')} -> {f(r['rss_mb_last'], '.0f')} (max {f(r['rss_mb_max'], '.0f')}, "
@@ -159,8 +196,14 @@ def main_nodes(args: argparse.Namespace) -> int:
     log_dir = Path(args.json).parent / "bench_nodes_logs" if args.json else Path(".atsvo_cache") / "bench_nodes_logs"
     results: dict[str, Any] = {"sequence": str(bag), "nodes": "tracking_node + mapping_node" if args.split
                                else "atsvo_node", "mode": args.mode, "queue_size": args.queue_size, "runs": {}}
-    print(f"calibration: {bag.name} at its own rate ({results['nodes']}, mode {args.mode})", flush=True)
-    cal = _run(bag, args, 1.0, log_dir)
+    ref = replay(bag, log_dir.parent / "bench_nodes_replay", load_config("synthetic"), mode=args.mode, plots=False,
+                 progress=False)  # the nodes run config/synthetic.yaml
+    gt = read_tum(ref.out_dir / "groundtruth.tum") if (ref.out_dir / "groundtruth.tum").is_file() else None
+    results["replay_ate_m"] = ref.metrics.get("ate_rmse_m") if ref.metrics else None
+    results["hogs"] = args.hogs
+    print(f"calibration: {bag.name} at its own rate ({results['nodes']}, mode {args.mode}, {args.hogs} CPU hog(s); "
+          f"atsvo-replay ATE {100 * (results['replay_ate_m'] or float('nan')):.2f} cm)", flush=True)
+    cal = _run(bag, args, 1.0, log_dir, gt=gt)
     results["runs"]["real_time"] = cal
     sustainable_fps = 1000.0 / cal["worker_ms_mean"]
     recorded_fps = cal["scheduled_fps"]
@@ -171,8 +214,8 @@ def main_nodes(args: argparse.Namespace) -> int:
         rate = load * sustainable_fps / recorded_fps
         print(f"{load:g}x sustainable: publishing at {rate:.2f}x real time"
               + (f", {args.repeat} passes" if args.repeat > 1 else ""), flush=True)
-        results["runs"][f"{load:g}x"] = _run(bag, args, rate, log_dir, args.repeat)
-    header = ("| run | x real time | frames/s due / sent | odometry / frames | latency ms p50 / p99 / max | "
+        results["runs"][f"{load:g}x"] = _run(bag, args, rate, log_dir, args.repeat, gt=gt)
+    header = ("| run | x real time | frames/s due / sent | odometry / frames | ATE cm | latency ms p50 / p99 / max | "
               "queue drops | DDS lost | event msgs decoded | RSS MB (all node processes) | exit |")
     print()
     print(header)

@@ -401,7 +401,9 @@ def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: lis
         executor = MultiThreadedExecutor(num_threads=2, context=context)
         executor.add_node(node)
         threading.Thread(target=executor.spin, daemon=True).start()
-        if not player.wait_for_subscribers(start_timeout_s):
+        # an RGB-D node subscribes to no event topic: wait for the topics it takes
+        wanted = None if config.mode == "fused" else [t.rgb, t.depth, t.rgb_info, t.imu]
+        if not player.wait_for_subscribers(start_timeout_s, wanted):
             raise AtsvoError(f"the nodes did not subscribe within {start_timeout_s:g} s: " + procs.log_tail())
         if "tracking_node" in scripts and not probe.wait(
                 lambda: (probe.diag("odometry") or {}).get("mapping") == "connected", start_timeout_s):
