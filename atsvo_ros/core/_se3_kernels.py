@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit
 
 
-@njit("float64[::1](float64[:, ::1], float64[:, ::1], float64)", cache=True)
+@njit("float64[::1](float64[:, ::1], float64[:, ::1], float64)", cache=True, nogil=True)
 def _twist_per_s(T1, T0, dt_s):  # pragma: no cover - compiled
     """Twist ``xi`` (translation first) with ``T1 = exp(dt_s xi) T0``, divided by ``dt_s``; zeros if ``dt_s <= 0``.
 

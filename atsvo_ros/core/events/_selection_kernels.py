@@ -5,7 +5,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _thin(xs: np.ndarray, ys: np.ndarray, order: np.ndarray, d: int, width: int, height: int,
           max_points: int) -> np.ndarray:
     """Visit candidates in ``order``; keep one unless a kept pixel lies within d in x and in y.
@@ -36,7 +36,7 @@ def _thin(xs: np.ndarray, ys: np.ndarray, order: np.ndarray, d: int, width: int,
     return keep[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _event_pixels(x, y, t, t_from, t_to, lut_x, lut_y, raw_w, raw_h, out):  # pragma: no cover - compiled
     """Mark in ``out`` (bool, target grid) the pixels of events with ``t_from < t <= t_to``.
 

@@ -9,7 +9,7 @@ from numba import njit
 NEVER = np.iinfo(np.int64).min  # t_last of a pixel that never fired
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _set_last(t_last: np.ndarray, x: np.ndarray, y: np.ndarray, t: np.ndarray) -> int:
     """Per-pixel latest timestamp; skips (and counts) events outside or older than their pixel's last."""
     h, w = t_last.shape
@@ -27,7 +27,7 @@ def _set_last(t_last: np.ndarray, x: np.ndarray, y: np.ndarray, t: np.ndarray) -
     return skipped
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _set_last_padded(t_last: np.ndarray, x: np.ndarray, y: np.ndarray, t: np.ndarray, w: int, h: int, wp: int,
                      pad: int) -> int:
     """:func:`_set_last` on the flat surface padded by ``pad`` pixels (row length ``wp``): the whole per-event
@@ -61,7 +61,7 @@ def _ring_list_init(n: int) -> np.int64:
     return np.array([sum(k << (4 * k) for k in range(n))], np.uint64).view(np.int64)[0]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _ring_touch(rec: np.ndarray, p: np.uint64, j: int, high: int, tail_bit: int) -> None:
     """Ring neighbour ``j`` of pixel ``p`` fired: move ``j`` to the front of p's recency list.
 
@@ -77,7 +77,7 @@ def _ring_touch(rec: np.ndarray, p: np.uint64, j: int, high: int, tail_bit: int)
     rec[p] = (lst ^ ((lst ^ (lst << 4)) & upto)) | j  # those take their predecessor's value, nibble 0 then j
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ats_update(t_last: np.ndarray, rec: np.ndarray, x: np.ndarray, y: np.ndarray, t: np.ndarray,
                 off: np.ndarray, n: int, w: int, h: int, wp: int, pad: int) -> int:
     """Per-pixel last time plus, for every pixel, which ring neighbours are its n most recent (active) ones.
@@ -111,7 +111,7 @@ def _ats_update(t_last: np.ndarray, rec: np.ndarray, x: np.ndarray, y: np.ndarra
     return skipped
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ring_sums(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, row: int, w: int, t_ns: int,
                t_min: int, buf: np.ndarray) -> int:
     """For the pixels of row .. row + w - 1 that fired at or after ``t_min`` (their count returned), in order:
@@ -151,7 +151,7 @@ def _ring_sums(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, row
     return int(c)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _upwind_sums(t_last: np.ndarray, off: np.ndarray, row: int, w: int, t_ns: int, t_min: int, clip_ns: int,
                  buf: np.ndarray) -> int:
     """``fire_age`` counterpart of :func:`_ring_sums`: for the pixels of the row that fired at or after ``t_min``,
@@ -187,7 +187,7 @@ _LN2_LO = 1.42860682030941723212e-6
 _X_MAX = 87.0  # exp(-87) * 255 is still a normal float32; beyond, Eq. 1 gives 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _eq1(c: int, buf: np.ndarray, tau_l_s: float, tau_u_s: float, mode: int, gain: float, cutoff_age_s: float,
          keep_old: bool, val: np.ndarray, tau_row: np.ndarray, scale_bits: np.ndarray) -> None:
     """Eq. 1-2 for the ``c`` pixels listed in ``buf`` (see :func:`_ring_sums`, :func:`_upwind_sums`): ``tau_row``
@@ -222,7 +222,7 @@ def _eq1(c: int, buf: np.ndarray, tau_l_s: float, tau_u_s: float, mode: int, gai
         val[i] = 255.0 * e if keep else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ats_render(t_last: np.ndarray, rec: np.ndarray, off: np.ndarray, n: int, w: int, h: int, wp: int, pad: int,
                 t_ns: int, tau_l_s: float, tau_u_s: float, mode: int, gain: float, cutoff_age_s: float,
                 out: np.ndarray, tau_out: np.ndarray, want_tau: bool) -> None:
@@ -273,7 +273,7 @@ _LN2_HI32 = 0.693359375  # ln 2 split for float32 (Cody-Waite): q * _LN2_HI32 is
 _LN2_LO32 = -2.12194440e-4
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _ages_f32(t_last: np.ndarray, t_ns: int, sat_s: float, age: np.ndarray) -> None:
     """``t_ns - t_last`` in seconds as float32 over the (padded, flat) surface, saturated at ``sat_s``; NaN where
     a pixel never fired (every comparison with it is false, so it never counts as a neighbour)."""
@@ -284,7 +284,7 @@ def _ages_f32(t_last: np.ndarray, t_ns: int, sat_s: float, age: np.ndarray) -> N
         age[i] = a if v != NEVER else np.float32(np.nan)
 
 
-@njit(cache=True, error_model="numpy", fastmath={"reassoc", "contract"}, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"}, inline="always")
 def _fire_age_block(age: np.ndarray, off: np.ndarray, p0: int, n: int, clip_s: float, tau_l_s: float, tau_u_s: float,
                     gain: float, cutoff_s: float, val: np.ndarray, bits: np.ndarray) -> None:
     """``fire_age`` Eq. 1-2 for ``n`` consecutive pixels from flat index ``p0`` with a 16-point ring, in float32.
@@ -404,7 +404,7 @@ def _fire_age_block(age: np.ndarray, off: np.ndarray, p0: int, n: int, clip_s: f
 _FA_BLOCK = 16  # pixels per block of the fire_age render (one 512-bit vector of float32)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _fire_age_render(t_last: np.ndarray, off: np.ndarray, w: int, h: int, wp: int, pad: int, t_ns: int,
                      tau_l_s: float, tau_u_s: float, gain: float, cutoff_s: float, age: np.ndarray,
                      out: np.ndarray) -> None:
@@ -448,7 +448,7 @@ def _fire_age_render(t_last: np.ndarray, off: np.ndarray, w: int, h: int, wp: in
                 x0 += n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _constant_render(t_last: np.ndarray, t_ns: int, tau_s: float, out: np.ndarray) -> None:
     """Eq. 1 with one tau for every pixel."""
     h, w = t_last.shape
@@ -462,7 +462,7 @@ def _constant_render(t_last: np.ndarray, t_ns: int, tau_s: float, out: np.ndarra
                 out[yy, xx] = 255.0 * np.exp(-max(t_ns - tl, 0) * 1e-9 * inv)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sits_update(surface: np.ndarray, x: np.ndarray, y: np.ndarray, radius: int, w: int, h: int, wp: int) -> int:
     """Speed-invariant time surface (Manderscheid et al. 2019, Alg. 1), polarities merged.
 

@@ -42,7 +42,7 @@ class TemporaryEventMap:
         return len(self.points_w)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _zbuffer(depth, fx, fy, cx, cy, T, efx, efy, ecx, ecy, out):  # pragma: no cover - compiled
     """Scatter every valid depth pixel into ``out`` (event camera, +inf = none yet), keeping the smallest z.
 

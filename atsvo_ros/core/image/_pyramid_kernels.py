@@ -5,7 +5,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gradient_stack(img):  # pragma: no cover - compiled
     """(H, W, 3) float32 ``[I, dI/dx, dI/dy]`` with central differences (0 on the border)."""
     h, w = img.shape
@@ -24,7 +24,7 @@ def _gradient_stack(img):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _depth_pyramid_level(depth, max_ratio):  # pragma: no cover - compiled
     """Half-resolution depth: the mean of the valid pixels of each 2x2 block when they agree within
     ``max_ratio`` of their minimum, else 0 (invalid): a coarse pixel never averages across an edge."""
@@ -50,7 +50,7 @@ def _depth_pyramid_level(depth, max_ratio):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _valid_depth(depth, min_m, max_m):  # pragma: no cover - compiled
     """A copy with 0 wherever the depth is not a finite value within ``[min_m, max_m]``."""
     h, w = depth.shape

@@ -5,7 +5,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bilinear(img, uv, out, valid):  # pragma: no cover - compiled
     """Sample ``img`` (H, W float32) at ``uv`` (N, 2 float64 x, y) into ``out``/``valid``; 0 where invalid.
 

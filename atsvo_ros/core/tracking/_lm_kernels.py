@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit
 
 
-@njit("float64[::1](float64[:, ::1], float64[::1], float64[:, ::1])", cache=True)
+@njit("float64[::1](float64[:, ::1], float64[::1], float64[:, ::1])", cache=True, nogil=True)
 def _solve_spd(A, b, L):  # pragma: no cover - compiled
     """Solve ``A x = b`` for a small symmetric positive-definite ``A`` by Cholesky (``L`` is scratch).
 
@@ -52,7 +52,7 @@ def _solve_spd(A, b, L):  # pragma: no cover - compiled
 
 
 @njit("Tuple((float64[::1], float64[:, ::1]))(float64[:, ::1], float64[::1], float64, float64[:, ::1])",
-      cache=True)
+      cache=True, nogil=True)
 def _lm_step(H, g, lam, T):  # pragma: no cover - compiled
     """Damped Gauss-Newton step ``(H + lam diag H) delta = -g`` and ``exp(delta[:6]) @ T``.
 

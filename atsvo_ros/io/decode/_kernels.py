@@ -59,17 +59,17 @@ _LC_HALF = 1 << 30
 # ------------------------------------------------------------------ little helpers
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _u16(b, j):
     return np.int64(b[j]) | (np.int64(b[j + 1]) << 8)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _u32(b, j):
     return np.int64(b[j]) | (np.int64(b[j + 1]) << 8) | (np.int64(b[j + 2]) << 16) | (np.int64(b[j + 3]) << 24)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _limits(width, height):
     """Exclusive coordinate limits; an unknown size (0) accepts every coordinate."""
     if width <= 0 or height <= 0:
@@ -77,7 +77,7 @@ def _limits(width, height):
     return np.int64(width), np.int64(height)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _reset_outputs(st):
     for i in range(O_ERR, P_ROS):
         st[i] = 0
@@ -86,7 +86,7 @@ def _reset_outputs(st):
 # ------------------------------------------------------------------ payload words
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _words16(b, off, size):
     """The payload as little-endian uint16 words: a view when aligned, else an aligned copy."""
     n = size // 2
@@ -97,7 +97,7 @@ def _words16(b, off, size):
     return w.view(np.uint16)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _words32(b, off, size):
     """The payload as little-endian uint32 words (two per 8-byte record): a view when aligned, else a copy."""
     n = size // 8 * 2
@@ -116,7 +116,7 @@ def _words32(b, off, size):
 # frequency predict well and beat branch-free selects here.
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_libcaer_cmp(words, tb, width, height, st, xs, ys, ts, ps, k0):
     """libcaer_cmp words -> events from ``k0``; time words restart at 0 in every packet."""
     wl, hl = _limits(width, height)
@@ -196,7 +196,7 @@ def _fill_libcaer_cmp(words, tb, width, height, st, xs, ys, ts, ps, k0):
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_libcaer(words, tb, width, height, st, xs, ys, ts, ps, k0):
     """libcaer records (uint32 address, int32 us), unwrapping the 31-bit counter across packets."""
     wl, hl = _limits(width, height)
@@ -257,7 +257,7 @@ def _fill_libcaer(words, tb, width, height, st, xs, ys, ts, ps, k0):
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_mono(words, tb, width, height, st, xs, ys, ts, ps, k0):
     """mono uint64 words ``p << 63 | y << 48 | x << 32 | dt_ns`` (read as low, high uint32)."""
     wl, hl = _limits(width, height)
@@ -293,7 +293,7 @@ def _fill_mono(words, tb, width, height, st, xs, ys, ts, ps, k0):
     return k
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _unwrap_high(v, high, have_high):
     """New absolute TIME_HIGH (in 4096 us ticks) for the 12-bit value ``v``: nearest step, see module doc.
 
@@ -308,7 +308,7 @@ def _unwrap_high(v, high, have_high):
     return nh, 1 if delta < 0 else 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_evt3(words, width, height, st, xs, ys, ts, ps, k0, tt, te, ti):
     """evt3 words -> events (camera clock in ns, plus ``S_OFFSET``) and triggers; state in ``st``.
 
@@ -431,7 +431,7 @@ def _fill_evt3(words, width, height, st, xs, ys, ts, ps, k0, tt, te, ti):
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _trigger_count(b, off, size):
     """Number of evt3 EXT_TRIGGER words in a payload (to size the trigger outputs)."""
     n = 0
@@ -443,7 +443,7 @@ def _trigger_count(b, off, size):
 # ------------------------------------------------------------------ payload entry point
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_payload(enc, b, off, size, tb, width, height, st, xs, ys, ts, ps, k0, tt, te, ti):
     """Decode one payload into the outputs from ``k0``; returns an error code, counts in ``st``.
 
@@ -482,7 +482,7 @@ def _decode_payload(enc, b, off, size, tb, width, height, st, xs, ys, ts, ps, k0
 # ------------------------------------------------------------------ dvs arrays and ordering helpers
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _dvs_fields(ex: np.ndarray, ey: np.ndarray, esec: np.ndarray, ensec: np.ndarray, ep: np.ndarray,
                 xs: np.ndarray, ys: np.ndarray, ts: np.ndarray, ps: np.ndarray, offset: int) -> None:
     """Copy strided dvs Event fields into the output arrays from ``offset`` on, in one pass."""
@@ -493,7 +493,7 @@ def _dvs_fields(ex: np.ndarray, ey: np.ndarray, esec: np.ndarray, ensec: np.ndar
         ps[offset + i] = 1 if ep[i] != 0 else 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _count_backwards(t: np.ndarray, last_t: int) -> int:
     """How many events are older than the newest one before them (``last_t`` included)."""
     n = t.shape[0]
@@ -514,7 +514,7 @@ def _count_backwards(t: np.ndarray, last_t: int) -> int:
     return bad
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _keep_forward(t: np.ndarray, last_t: int) -> np.ndarray:
     """Mask of the events not older than the newest one before them."""
     keep = np.empty(t.shape[0], np.bool_)

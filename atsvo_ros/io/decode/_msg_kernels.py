@@ -48,7 +48,7 @@ from atsvo_ros.io.decode._kernels import (
 )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _align(pos, size):
     return (pos + size - 1) // size * size
 
@@ -66,13 +66,13 @@ def arena_views(block: np.ndarray, capacity: int) -> tuple[np.ndarray, np.ndarra
             block[:8 * c].view(np.int64), block[12 * c:13 * c])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _arena(block, c):
     return (block[8 * c:10 * c].view(np.uint16), block[10 * c:12 * c].view(np.uint16),
             block[:8 * c].view(np.int64), block[12 * c:13 * c])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _time_base_ok(enc, tb_lo, tb_top):
     """Whether the uint64 time base (low 56 bits, top byte) plus the encoding's offsets fits int64 ns."""
     if enc == ENC_EVT3:
@@ -83,7 +83,7 @@ def _time_base_ok(enc, tb_lo, tb_top):
     return tb <= INT64_MAX - MAX_OFFSET_NS[enc]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _match_encoding(b, start, n):
     """Index of the encoding named by ``b[start:start+n]`` (trailing NULs ignored), or -1."""
     while n > 0 and b[start + n - 1] == 0:
@@ -101,7 +101,7 @@ def _match_encoding(b, start, n):
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _parse_packet(b, ros_version, st):
     """EventPacket header -> (error, payload offset, payload size); header fields into ``st``.
 
@@ -183,13 +183,13 @@ def _parse_packet(b, ros_version, st):
     return OK, pos, size
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_msg(b, st, block):
     """One serialized EventPacket into the arena (see :func:`_decode_msg_into`)."""
     return _decode_msg_into(b, st, block, np.empty(0, np.int64), np.empty(0, np.uint8))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_msg_into(b, st, block, no_i64, no_u8):
     """Serialized EventPacket -> events into the arena ``block`` from ``st[P_K0]``; returns an error code.
 
@@ -214,7 +214,7 @@ def _decode_msg_into(b, st, block, no_i64, no_u8):
     return err
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_msgs(blob, starts, ends, st, block):
     """:func:`_decode_msg` over consecutive messages ``blob[starts[i]:ends[i]]``, counts summed.
 

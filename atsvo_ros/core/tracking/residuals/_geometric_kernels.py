@@ -11,13 +11,13 @@ INLIER = 1
 OUTLIER = 2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _backproject(depth, x, y, fx, fy, cx, cy):  # pragma: no cover - compiled
     z = depth[y, x]
     return (x - cx) / fx * z, (y - cy) / fy * z, z
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _linearise_geometric(pts_w, depth, fx, fy, cx, cy, T_rw, T_cr, sigma_at_1m, sigma_min, huber, outlier,
                          edge_ratio, vel, rs_t0, rs_line, H, g, state):  # pragma: no cover - compiled
     """Point-to-plane normal equations of map points against the current depth image (one pyramid level).

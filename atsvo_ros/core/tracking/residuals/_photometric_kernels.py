@@ -10,7 +10,7 @@ INLIER = 1
 OUTLIER = 2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _at_row_time(px, py, pz, qx, qy, qz, R, vel, dt):  # pragma: no cover - compiled
     """Rolling shutter: where a point is in the block camera ``dt`` seconds after the frame's reference time.
 
@@ -25,7 +25,7 @@ def _at_row_time(px, py, pz, qx, qy, qz, R, vel, dt):  # pragma: no cover - comp
             qz + dt * (R[2, 0] * vx + R[2, 1] * vy + R[2, 2] * vz))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _zncc(a, b):  # pragma: no cover - compiled
     """Zero-mean normalised cross-correlation of two patches (NaN when one has no contrast)."""
     n = a.shape[0]
@@ -49,7 +49,7 @@ def _zncc(a, b):  # pragma: no cover - compiled
     return sab / den if den > 1e-9 else np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _linearise(pts_w, patches, img, pattern, fx, fy, cx, cy, T_rw, T_cr, gain, offset, huber, outlier_thr,
                border, grad_c2, zero_mean, zref, max_scale, vel, rs_t0, rs_line, H, g, state,
                zncc, want_zncc):  # pragma: no cover - compiled
