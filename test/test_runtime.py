@@ -390,7 +390,7 @@ def _sensor_messages(bag, cfg):
     return [m for m in _messages(bag) if m[0] in (t.rgb, t.depth, t.imu, t.events, t.rgb_info, t.event_info)]
 
 
-def test_a_starved_node_catching_up_gives_every_frame_its_imu_and_events(bag):
+def test_a_starved_node_catching_up_gives_every_frame_its_imu_and_events(bag, monkeypatch):
     """The CI failure: a node starved of CPU for 0.4 s drains its backlogs one message per topic per executor
     cycle, so the 30 Hz images catch up in stamp time long before the events and the IMU. Streams that are only
     late must not count as stalled: with the arrival clock every frame gets what an in-order replay gives it;
@@ -437,7 +437,11 @@ def test_a_starved_node_catching_up_gives_every_frame_its_imu_and_events(bag):
     assert len(ref[0]) >= 15 and got == ref
     assert live.counters["imu_late"] == 0 and live.counters["frames_without_imu"] == 0
     assert live.assembler.stats.released_without_events == 0 and live.assembler.stats.late_events == 0
-    # judged by stamps alone, the same arrival order loses IMU samples and events
+    # a replay (no clock) waits REPLAY_EVENT_WAIT_S of stamp time for a late stream: the same order loses nothing
+    assert _deliver(OdometryRuntime(cfg, core_factory=_StreamRecording), cfg, starved, lambda k: None) == ref
+    # judged by stamps alone with the node's 0.25 s wait, the same arrival order loses IMU samples and events
+    # (a replay, which has no deadline, waits REPLAY_EVENT_WAIT_S instead)
+    monkeypatch.setattr(OdometryRuntime, "REPLAY_EVENT_WAIT_S", 0.25)
     stamps_only = OdometryRuntime(cfg, core_factory=_StreamRecording)
     assert _deliver(stamps_only, cfg, starved, lambda k: None) != ref
     lost = stamps_only.counters, stamps_only.assembler.stats

@@ -280,7 +280,9 @@ def test_asynchronous_nodes_are_as_accurate_as_the_replay(sequence, scripts):
         assert (ats[-1].encoding, sel[-1].encoding, ats[-1].width) == ("mono8", "rgb8", 80)
     ate, ref = _ate(run, gt), _inline_over_the_same_frames(bag, run.stamps, gt)
     d = run.diag
-    why = (ate, ref, metrics["ate_rmse_m"], {k: d[k] for k in ("queue_drops", "keyframes", "mapping") if k in d})
+    keys = ("queue_drops", "keyframes", "mapping", "mapping_timeouts", "mapping_round_trip_ms", "worker_ms_mean")
+    why = (ate, ref, metrics["ate_rmse_m"], {k: d[k] for k in keys if k in d},
+           {s: run.statuses.count(s) for s in set(run.statuses)})
     assert ate <= max(1.5 * ref, ref + 0.005), why
 
 
