@@ -171,8 +171,6 @@ def test_events_reach_the_core_cut_at_frame_stamps_from_messages_or_raw_bytes(ba
 class _ImuRecording:
     """A core double that records which IMU samples it had when each frame came (and answers with the identity)."""
 
-    supports_events = False
-
     def __init__(self, config, rgb_camera, event_camera=None):
         from atsvo_ros.core.imu import ImuBatch
 
@@ -282,8 +280,7 @@ def test_event_messages_wait_for_the_event_camera_info(bag):
     items = list(_messages(bag, raw_events=True))
     ev = [(t, mt, m) for t, mt, m in items if t == cfg.topics.events]
     info = next(m for t, _, m in items if t == cfg.topics.event_info)
-    fusing = type("Fusing", (_ImuRecording,), {"supports_events": True})
-    rt = OdometryRuntime(cfg, core_factory=fusing, use_events=True)
+    rt = OdometryRuntime(cfg, core_factory=_ImuRecording, use_events=True)
     for t, mt, m in ev[:50]:
         rt.add_event_msg(m, mt, t)
     assert rt.counters["event_msgs"] == 0  # held
@@ -359,8 +356,6 @@ def test_sinks_get_every_output_right_after_its_frame():
 
 class _StreamRecording(_ImuRecording):
     """Records, per frame, the IMU stamps and the events it had (a fusing core double)."""
-
-    supports_events = True
 
     def __init__(self, config, rgb_camera, event_camera=None):
         super().__init__(config, rgb_camera, event_camera)

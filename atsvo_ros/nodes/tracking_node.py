@@ -116,7 +116,6 @@ class TrackingNode(Node):
         def make_core(config, rgb_camera, event_camera=None):
             return Odometry(config, rgb_camera, event_camera, mapping=self._make_mapping_port)
 
-        make_core.supports_events = True
         # arrival clock: a stream is stalled when silent, not merely behind (backlogs drain unevenly)
         self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=make_core,
                                        clock=time.monotonic_ns)
