@@ -1,4 +1,9 @@
-"""Peer RGB-D odometries run on exactly our frames, for side-by-side scoring: Open3D's multi-scale RGB-D odometry.
+"""Peer RGB-D odometries run on exactly our frames, for side-by-side scoring: OpenCV's and Open3D's.
+
+OpenCV's dense odometry (``cv2.Odometry``, the ``3d`` module of OpenCV 5, always installed) is run with
+its three data types: ``rgb`` (photometric, Steinbruecker et al.), ``depth`` (ICP on the depth) and
+``rgbd`` (both), accurate variant (``OdometryAlgoType_COMMON``), OpenCV's default settings but the
+camera matrix and depth range.
 
 Open3D (optional extra ``peers``) is run frame to frame through its tensor API
 (``open3d.t.pipelines.odometry.rgbd_odometry_multi_scale``) with each of its three losses:
@@ -11,7 +16,8 @@ parameters unless given) and the relative poses are chained into ``T_world_cam``
 frame at the origin.
 
 Open3D reports no tracking failure: a frame counts as ok when the result is finite and some pixels
-were inliers (``fitness > 0``).
+were inliers (``fitness > 0``). OpenCV's ``compute`` says whether it succeeded; a failed frame keeps
+the previous pose. Every peer runs frame to frame from an identity guess: none keeps a map.
 """
 from __future__ import annotations
 
@@ -30,6 +36,9 @@ from atsvo_ros.io.trajectory import Trajectory
 
 #: our method names -> Open3D's ``Method`` members
 OPEN3D_METHODS: dict[str, str] = {"point_to_plane": "PointToPlane", "hybrid": "Hybrid", "intensity": "Intensity"}
+#: our method names -> OpenCV's ``OdometryType`` constants
+OPENCV_METHODS: dict[str, str] = {"rgbd": "ODOMETRY_TYPE_RGB_DEPTH", "rgb": "ODOMETRY_TYPE_RGB",
+                                  "depth": "ODOMETRY_TYPE_DEPTH"}
 
 
 @dataclass
@@ -54,6 +63,101 @@ class PeerRun:
         """The poses as a :class:`~atsvo_ros.io.trajectory.Trajectory`."""
 
         return Trajectory(self.stamps_ns, self.T_world_cam)
+
+
+class _Chain:
+    """One method's frame-to-frame results, chained into ``T_world_cam`` with the first frame at the origin."""
+
+    def __init__(self) -> None:
+        self.T = np.eye(4)
+        self.poses: list[np.ndarray] = []
+        self.ok: list[bool] = []
+        self.t: list[float] = []
+        self.fit: list[float] = []
+        self.rmse: list[float] = []
+
+    def first(self) -> None:
+        """The first frame: the reference at the origin."""
+        self.step(np.eye(4), True, 0.0, np.nan, np.nan)
+
+    def step(self, T_prev_cur: np.ndarray, ok: bool, dt_s: float, fitness: float, rmse: float) -> None:
+        """Chain one result (``T_prev_cur`` maps this camera into the previous one; ignored when not ok)."""
+        if ok:
+            self.T = self.T @ T_prev_cur
+        self.poses.append(self.T.copy())
+        self.ok.append(bool(ok))
+        self.t.append(float(dt_s))
+        self.fit.append(float(fitness))
+        self.rmse.append(float(rmse))
+
+    def run(self, name: str, stamps: list[int], prep: list[float], info: dict[str, Any]) -> PeerRun:
+        return PeerRun(name, np.asarray(stamps, np.int64), np.stack(self.poses), np.asarray(self.ok),
+                       np.asarray(self.t), np.asarray(prep), np.asarray(self.fit), np.asarray(self.rmse), info)
+
+
+def _check_methods(kind: str, methods: Sequence[str], known: dict[str, str]) -> None:
+    unknown = [m for m in methods if m not in known]
+    if unknown or not methods:
+        raise EvaluationError(f"unknown {kind} method(s) {unknown} (choose from {', '.join(known)})")
+
+
+def _check_stamp(stamps: list[int], stamp: int) -> None:
+    if stamps and stamp <= stamps[-1]:
+        raise EvaluationError(f"frame stamps must increase: {stamp} ns after {stamps[-1]} ns")
+
+
+def run_opencv(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: CameraModel,
+               methods: Sequence[str] = tuple(OPENCV_METHODS), *, depth_min_m: float = 0.0,
+               depth_max_m: float = 4.0, progress: bool = False) -> dict[str, PeerRun]:
+    """OpenCV's frame-to-frame dense odometry over ``(stamp_ns, rgb, depth_m)`` frames, one run per method.
+
+    Args:
+        frames: raw frames in time order (RGB uint8 or grey, depth float32 metres, 0 = invalid),
+            streamed: each frame is undistorted once and shared by all methods.
+        camera: the raw colour camera (its pinhole K is passed to OpenCV).
+        methods: keys of :data:`OPENCV_METHODS`.
+        depth_min_m, depth_max_m: the depth range OpenCV uses (its defaults are 0 and 4 m).
+        progress: show a progress bar on stderr.
+    """
+    _check_methods("OpenCV", methods, OPENCV_METHODS)
+    odos = {}
+    for m in methods:
+        settings = cv2.OdometrySettings()
+        settings.setCameraMatrix(camera.pinhole().K.astype(np.float32))
+        settings.setMinDepth(float(depth_min_m))
+        settings.setMaxDepth(float(depth_max_m))
+        odos[m] = cv2.Odometry(getattr(cv2, OPENCV_METHODS[m]), settings, cv2.OdometryAlgoType_COMMON)
+    chains = {m: _Chain() for m in methods}
+    stamps: list[int] = []
+    prep: list[float] = []
+    prev = None
+    for stamp, img, depth, t_prep in tqdm(undistorted_frames(frames, camera), disable=not progress, unit="frame",
+                                          desc="opencv", leave=False):
+        _check_stamp(stamps, stamp)
+        t0 = time.perf_counter()
+        grey = cv2.cvtColor(np.round(img * 255.0).astype(np.uint8), cv2.COLOR_RGB2GRAY)
+        t_prep += time.perf_counter() - t0
+        stamps.append(stamp)
+        prep.append(t_prep)
+        for m in methods:
+            if prev is None:
+                chains[m].first()
+                continue
+            t0 = time.perf_counter()
+            # OpenCV's Rt maps source points into the destination: source = this frame, destination = the previous.
+            src, dst = cv2.OdometryFrame(depth, grey), cv2.OdometryFrame(prev[0], prev[1])
+            odos[m].prepareFrames(src, dst)
+            ok, Rt = odos[m].compute(src, dst)
+            dt = time.perf_counter() - t0
+            T_prev_cur = np.asarray(Rt, np.float64)
+            ok = bool(ok) and T_prev_cur.shape == (4, 4) and bool(np.all(np.isfinite(T_prev_cur)))
+            chains[m].step(T_prev_cur, ok, dt, np.nan, np.nan)
+        prev = (depth, grey)
+    if not stamps:
+        raise EvaluationError("no frames given to the OpenCV peer")
+    info = {"opencv": cv2.__version__, "depth_range_m": [float(depth_min_m), float(depth_max_m)],
+            "algo": "COMMON", "init": "identity", "undistorted": camera.is_distorted}
+    return {m: c.run(f"opencv_{m}", stamps, prep, dict(info, method=OPENCV_METHODS[m])) for m, c in chains.items()}
 
 
 def import_open3d() -> Any:
@@ -110,21 +214,19 @@ def run_open3d(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: Cam
     """
     o3d = import_open3d()
 
-    unknown = [m for m in methods if m not in OPEN3D_METHODS]
-    if unknown or not methods:
-        raise EvaluationError(f"unknown Open3D method(s) {unknown} (choose from {', '.join(OPEN3D_METHODS)})")
+    _check_methods("Open3D", methods, OPEN3D_METHODS)
     odo = o3d.t.pipelines.odometry
     K = o3d.core.Tensor(camera.pinhole().K, dtype=o3d.core.float64)
     crit = [odo.OdometryConvergenceCriteria(int(n)) for n in criteria]
     params = odo.OdometryLossParams(**(loss or {}))
     eye = o3d.core.Tensor(np.eye(4), dtype=o3d.core.float64)
-    state = {m: {"prev": None, "T": np.eye(4), "poses": [], "ok": [], "t": [], "fit": [], "rmse": []} for m in methods}
+    chains = {m: _Chain() for m in methods}
     stamps: list[int] = []
     prep: list[float] = []
+    prev = None
     for stamp, img, depth, t_prep in tqdm(undistorted_frames(frames, camera), disable=not progress, unit="frame",
                                           desc="open3d", leave=False):
-        if stamps and stamp <= stamps[-1]:
-            raise EvaluationError(f"frame stamps must increase: {stamp} ns after {stamps[-1]} ns")
+        _check_stamp(stamps, stamp)
         t0 = time.perf_counter()
         rgbd = o3d.t.geometry.RGBDImage(o3d.t.geometry.Image(o3d.core.Tensor(img)),
                                         o3d.t.geometry.Image(o3d.core.Tensor(depth)))
@@ -132,39 +234,26 @@ def run_open3d(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: Cam
         stamps.append(stamp)
         prep.append(t_prep)
         for m in methods:
-            s = state[m]
-            if s["prev"] is None:
-                s["poses"].append(s["T"].copy())
-                s["ok"].append(True)
-                s["t"].append(0.0)
-                s["fit"].append(np.nan)
-                s["rmse"].append(np.nan)
-            else:
-                t0 = time.perf_counter()
-                # source = this frame, target = the previous one: the result maps this camera into the previous.
-                res = odo.rgbd_odometry_multi_scale(rgbd, s["prev"], K, eye, 1.0, float(depth_max_m), crit,
-                                                    getattr(odo.Method, OPEN3D_METHODS[m]), params)
-                dt = time.perf_counter() - t0
-                T_prev_cur = res.transformation.numpy().astype(np.float64)
-                ok = bool(np.all(np.isfinite(T_prev_cur)) and res.fitness > 0)
-                if ok:
-                    s["T"] = s["T"] @ T_prev_cur
-                s["poses"].append(s["T"].copy())
-                s["ok"].append(ok)
-                s["t"].append(dt)
-                s["fit"].append(float(res.fitness))
-                s["rmse"].append(float(res.inlier_rmse))
-            s["prev"] = rgbd
+            if prev is None:
+                chains[m].first()
+                continue
+            t0 = time.perf_counter()
+            # source = this frame, target = the previous one: the result maps this camera into the previous.
+            res = odo.rgbd_odometry_multi_scale(rgbd, prev, K, eye, 1.0, float(depth_max_m), crit,
+                                                getattr(odo.Method, OPEN3D_METHODS[m]), params)
+            dt = time.perf_counter() - t0
+            T_prev_cur = res.transformation.numpy().astype(np.float64)
+            ok = bool(np.all(np.isfinite(T_prev_cur)) and res.fitness > 0)
+            chains[m].step(T_prev_cur, ok, dt, float(res.fitness), float(res.inlier_rmse))
+        prev = rgbd
     if not stamps:
         raise EvaluationError("no frames given to the Open3D peer")
     info = {"open3d": o3d.__version__, "depth_max_m": float(depth_max_m), "criteria": list(criteria),
             "loss": {k: getattr(params, k) for k in ("depth_outlier_trunc", "depth_huber_delta",
                                                      "intensity_huber_delta")},
             "init": "identity", "undistorted": camera.is_distorted}
-    return {m: PeerRun(f"open3d_{m}", np.asarray(stamps, np.int64), np.stack(s["poses"]), np.asarray(s["ok"]),
-                       np.asarray(s["t"]), np.asarray(prep), np.asarray(s["fit"]), np.asarray(s["rmse"]),
-                       dict(info, method=OPEN3D_METHODS[m]))
-            for m, s in state.items()}
+    return {m: c.run(f"open3d_{m}", stamps, prep, dict(info, method=OPEN3D_METHODS[m])) for m, c in chains.items()}
 
 
-__all__ = ["OPEN3D_METHODS", "PeerRun", "import_open3d", "run_open3d", "undistorted_frames"]
+__all__ = ["OPEN3D_METHODS", "OPENCV_METHODS", "PeerRun", "import_open3d", "run_open3d", "run_opencv",
+           "undistorted_frames"]

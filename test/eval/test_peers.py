@@ -1,4 +1,4 @@
-"""Peer odometry (Open3D) on rendered frames with exact poses; the preprocessing is our odometry's."""
+"""Peer odometry (OpenCV, Open3D) on rendered frames with exact poses; the preprocessing is our odometry's."""
 from __future__ import annotations
 
 import sys
@@ -11,7 +11,7 @@ from atsvo_ros.config import load_config
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.geometry import se3_inv, se3_log
 from atsvo_ros.errors import EvaluationError
-from atsvo_ros.eval.peers import OPEN3D_METHODS, import_open3d, undistorted_frames
+from atsvo_ros.eval.peers import OPEN3D_METHODS, OPENCV_METHODS, import_open3d, run_opencv, undistorted_frames
 from test.core.render_helpers import BoxRoom
 from test.io.tum_helpers import render_frames
 
@@ -64,3 +64,21 @@ def test_open3d_trajectories_follow_the_rendered_motion(frames):
         assert run.info["method"] == OPEN3D_METHODS[name] and run.info["undistorted"]
     with pytest.raises(EvaluationError, match="unknown Open3D method"):
         run_open3d(iter(()), FR1, methods=("icp",))
+
+
+def test_opencv_trajectories_follow_the_rendered_motion(frames):
+    runs = run_opencv(((s, rgb, d) for s, rgb, d, _ in frames), FR1, depth_max_m=5.0)
+    assert set(runs) == set(OPENCV_METHODS)
+    T_gt = np.stack([f[3] for f in frames])
+    for name, run in runs.items():
+        assert run.name == f"opencv_{name}" and run.stamps_ns.tolist() == [f[0] for f in frames]
+        assert run.ok.all() and run.time_s[0] == 0.0 and np.all(run.time_s[1:] > 0)
+        assert np.allclose(run.T_world_cam[0], np.eye(4))
+        # chained the right way round: OpenCV's Rt maps this frame into the previous one
+        e = se3_log(se3_inv(T_gt[-1]) @ run.T_world_cam[-1])
+        assert np.linalg.norm(e[:3]) < 0.02 and np.degrees(np.linalg.norm(e[3:])) < 0.5, (name, e)
+        assert run.info["method"] == OPENCV_METHODS[name] and run.info["undistorted"]
+    with pytest.raises(EvaluationError, match="unknown OpenCV method"):
+        run_opencv(iter(()), FR1, methods=("icp",))
+    with pytest.raises(EvaluationError, match="no frames"):
+        run_opencv(iter(()), FR1)

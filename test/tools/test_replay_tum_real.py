@@ -6,10 +6,16 @@ do (SE(3) alignment over all poses, RPE per frame), and no frame may be reported
 wrong. Measured with the defaults: ATE 1.36 cm, RPE RMSE 0.338 deg/f (0.284 against the interpolated
 ground truth), 0 of 299 ok frames more than 1.5 deg wrong (Open3D's point-to-plane odometry: 9.7 cm,
 0.57 deg/f RMSE); the limits sit at ~2.6x (ATE) and ~1.8x (RPE) of that.
+
+Its every-2nd and every-3rd-frame subsamples turn 3-9 deg per frame (15 and 10 Hz, the regime of
+fr1_rpy's dropped frames): measured ATE 1.46 and 1.45 cm, 149/150 and 97/100 ok, no ok frame wrong
+by more than max(1.5 deg, 25 % of the frame's true rotation) (OpenCV's RGB-D odometry: 10.4 and
+10.1 cm, 4 and 9 such frames). Limits: ATE 3 cm, 90 % ok, no wrong-but-ok frame.
 """
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,13 +29,45 @@ pytestmark = pytest.mark.realdata
 
 
 @pytest.fixture(scope="module")
-def rpy_run(realdata, tmp_path_factory):
+def rpy_folder(realdata):
     folder = realdata / "tum_rgbd_fr1_rpy_300"
     if not folder.is_dir():
         pytest.skip(f"{folder} not found")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def rpy_run(rpy_folder, tmp_path_factory):
     out = tmp_path_factory.mktemp("rpy")
-    res = replay(folder, out, plots=False, progress=False, eval_options=EvalOptions(align="se3"))
-    return folder, out, res
+    res = replay(rpy_folder, out, plots=False, progress=False, eval_options=EvalOptions(align="se3"))
+    return rpy_folder, out, res
+
+
+def subsample(folder: Path, every: int, dst: Path) -> Path:
+    """A TUM folder holding every ``every``-th colour and depth frame of ``folder`` (images linked, not copied)."""
+    dst.mkdir(parents=True)
+    for name in ("rgb", "depth", "groundtruth.txt", "README.txt"):
+        (dst / name).symlink_to(folder / name)
+    for name in ("rgb.txt", "depth.txt"):
+        lines = (folder / name).read_text().splitlines()
+        body = [line for line in lines if not line.startswith("#")]
+        (dst / name).write_text("\n".join([line for line in lines if line.startswith("#")] + body[::every]) + "\n")
+    return dst
+
+
+def wrong_but_ok(gt_folder: Path, res, share: float = 0.25) -> list[tuple[int, float, float]]:
+    """Frames reported ok whose rotation since the previous frame is wrong by > max(1.5 deg, share x the true one)."""
+    gt = read_tum(gt_folder / "groundtruth.txt")
+    G, _ = interpolate_trajectory(gt.stamps_ns, gt.T_w_b, res.stamps_ns)
+    P = res.T_odom_x
+    out = []
+    for i in range(1, len(P)):
+        rel_gt = se3_inv(G[i - 1]) @ G[i]
+        err = np.degrees(np.linalg.norm(se3_log(se3_inv(rel_gt) @ (se3_inv(P[i - 1]) @ P[i]))[3:]))
+        true = np.degrees(np.linalg.norm(se3_log(rel_gt)[3:]))
+        if res.statuses[i] == "ok" and err > max(1.5, share * true):
+            out.append((i, round(float(err), 2), round(float(true), 2)))
+    return out
 
 
 def test_fr1_rpy_is_tracked_accurately(rpy_run):
@@ -44,13 +82,16 @@ def test_fr1_rpy_is_tracked_accurately(rpy_run):
 def test_no_frame_is_reported_ok_while_it_is_wrong(rpy_run):
     """Per frame, the rotation error of the motion since the previous frame: never > 1.5 deg with status ok."""
     folder, _, res = rpy_run
-    gt = read_tum(folder / "groundtruth.txt")
-    G, _ = interpolate_trajectory(gt.stamps_ns, gt.T_w_b, res.stamps_ns)
-    P = res.T_odom_x
-    wrong_ok = []
-    for i in range(1, len(P)):
-        E = se3_inv(se3_inv(G[i - 1]) @ G[i]) @ (se3_inv(P[i - 1]) @ P[i])
-        err = np.degrees(np.linalg.norm(se3_log(E)[3:]))
-        if err > 1.5 and res.statuses[i] == "ok":
-            wrong_ok.append((i, round(float(err), 2)))
-    assert not wrong_ok, wrong_ok
+    assert not wrong_but_ok(folder, res, share=0.0)
+
+
+@pytest.mark.parametrize("every", [2, 3])
+def test_subsampled_fr1_rpy_is_tracked_and_never_wrong_but_ok(rpy_folder, tmp_path, every):
+    """3-9 deg per frame: accurate, mostly ok, and no wrong pose reported as good."""
+    folder = subsample(rpy_folder, every, tmp_path / f"tum_rgbd_fr1_rpy_every{every}")
+    res = replay(folder, tmp_path / "out", plots=False, progress=False, eval_options=EvalOptions(align="se3"))
+    n = len(res.statuses)
+    assert n == len(range(0, 300, every))
+    assert res.metrics["ate_rmse_m"] <= 0.03, res.metrics
+    assert res.statuses.count("ok") >= 0.9 * n, {s: res.statuses.count(s) for s in set(res.statuses)}
+    assert not wrong_but_ok(folder, res)
