@@ -88,5 +88,9 @@ class WireError(AtsvoError):
     """A message of the atsvo wire format (keyframe requests, map snapshots between processes) is malformed."""
 
 
+class OutputError(AtsvoError):
+    """An output path cannot be written (a file where a folder is needed, no permission, the input itself)."""
+
+
 class RecordError(AtsvoError):
     """A run cannot be recorded as a bag (the output exists, a bad file name, no mcap writer in rosbags)."""

@@ -43,6 +43,11 @@ IMU_TYPES = ("sensor_msgs/msg/Imu",)
 PRESETS = ("mini_cheetah", "mvsec", "synthetic")
 
 
+def _role_types() -> dict[str, tuple[str, ...]]:
+    return {"rgb": IMAGE_TYPES, "depth": IMAGE_TYPES, "events": tuple(EVENT_MSGTYPES), "rgb_info": INFO_TYPES,
+            "event_info": INFO_TYPES, "ground_truth": POSE_TYPES, "tf_static": TF_TYPES, "imu": IMU_TYPES}
+
+
 @dataclass(frozen=True)
 class TopicSelection:
     """Topic chosen for each role (None = not in the bag)."""
@@ -202,12 +207,21 @@ def resolve_topics(topics: dict[str, str], explicit: dict[str, str | None] | Non
             raise BagError(f"unknown topic role {role!r} (known: {', '.join(ROLES)})")
         if name not in topics:
             raise BagError(f"topic {name} (given for {role}) is not in the bag; it has: {', '.join(sorted(topics))}")
+        allowed = _role_types()[role]
+        if topics[name] not in allowed:
+            flag = f"--{role.replace('_', '-')}-topic"
+            raise BagError(f"{flag} {name} is a {topics[name]} topic; it must be one of: {', '.join(allowed)}")
+        twice = next((r for r, t in chosen.items() if t == name and {r, role} & {"rgb", "depth", "ground_truth"}), None)
+        if twice:
+            raise BagError(f"topic {name} is given for both {twice} and {role}; each role needs its own topic")
         chosen[role] = name
     candidates = [config_topics or {}] + [preset_topics(p) for p in presets]
     for role in ROLES:
         if role in chosen:
             continue
-        chosen[role] = next((c[role] for c in candidates if c.get(role) in topics), None)
+        allowed = _role_types()[role]  # a configured name of another type is passed over, as a missing one is
+        chosen[role] = next((c[role] for c in candidates if c.get(role) in topics and topics[c[role]] in allowed),
+                            None)
         if chosen[role] is None:
             chosen[role] = _detect(role, topics, chosen)
     return TopicSelection(**chosen)

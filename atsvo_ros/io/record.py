@@ -30,6 +30,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
@@ -65,13 +66,19 @@ ODOMETRY, PATH, TF = "nav_msgs/msg/Odometry", "nav_msgs/msg/Path", "tf2_msgs/msg
 IMAGE, CLOUD = "sensor_msgs/msg/Image", "sensor_msgs/msg/PointCloud2"
 
 
-def check_record_path(path: str | Path, force: bool = False) -> Path:
+def check_record_path(path: str | Path, force: bool = False, inputs: Sequence[str | Path] = ()) -> Path:
     """The output path of a recording, checked before a run: a ``.mcap`` name, not there yet (unless ``force``).
 
     Raises :class:`RecordError` (with what to do) for another suffix, a directory, an existing file
-    without ``force``, or a rosbags without an mcap writer.
+    without ``force``, a path that is one of ``inputs`` or inside an input folder (``--force`` would
+    destroy the recording being replayed), or a rosbags without an mcap writer.
     """
     out = Path(path)
+    target = out.resolve()
+    for src in inputs:
+        src = Path(src).resolve()
+        if target == src or (src.is_dir() and src in target.parents):
+            raise RecordError(f"--record {out} would overwrite the input {src}; name another file")
     if out.suffix != ".mcap":
         raise RecordError(f"--record {out}: the file name must end in .mcap (a bare mcap file is written)")
     if out.is_dir():

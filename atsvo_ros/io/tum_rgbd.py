@@ -255,14 +255,18 @@ class TumRgbdReader:
         return detect_tum_preset(self.folder)
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[TumFrame]:
-        """Load the pairs ``start:stop`` one at a time, in time order."""
+        """Load the pairs ``start:stop`` one at a time, in time order; a missing or corrupt image raises."""
         for k in range(start, len(self.pairs) if stop is None else min(stop, len(self.pairs))):
-            p = self.pairs[k]
-            rgb, depth = read_colour(p.rgb), read_depth(p.depth)
-            if rgb.shape[:2] != depth.shape:
-                raise ImageError(f"depth {p.depth.path} is {depth.shape[1]}x{depth.shape[0]} but colour "
-                                 f"{p.rgb.path} is {rgb.shape[1]}x{rgb.shape[0]}")
-            yield TumFrame(k, p.stamp_ns, p.depth.stamp_ns, rgb, depth)
+            yield self.frame(k)
+
+    def frame(self, k: int) -> TumFrame:
+        """Load pair ``k``. Raises DatasetError (image missing) or ImageError (undecodable, sizes differ)."""
+        p = self.pairs[k]
+        rgb, depth = read_colour(p.rgb), read_depth(p.depth)
+        if rgb.shape[:2] != depth.shape:
+            raise ImageError(f"depth {p.depth.path} is {depth.shape[1]}x{depth.shape[0]} but colour "
+                             f"{p.rgb.path} is {rgb.shape[1]}x{rgb.shape[0]}")
+        return TumFrame(k, p.stamp_ns, p.depth.stamp_ns, rgb, depth)
 
     def summary(self) -> str:
         """One line on the pairing (for notes and logs)."""
@@ -330,7 +334,13 @@ class TumSource:
             g = self.reader.ground_truth()
             gt.extend(zip(g.stamps_ns.tolist(), g.T_w_b))
         rig = self._rig
-        for fr in self.reader.frames():
+        for k in range(len(self.reader)):
+            try:
+                fr = self.reader.frame(k)
+            except (DatasetError, ImageError) as exc:  # one bad image costs its frame, not the run (as in a bag)
+                sink.skip_input("images_rejected", f"TUM pair {k} skipped: {exc}")
+                yield
+                continue
             sink.add_rgb(fr.stamp_ns, fr.rgb)
             yield
             sink.add_depth(fr.stamp_ns, depth_to_metres(fr.depth_raw, rig.depth_scale_m, rig.depth_min_m,

@@ -160,6 +160,10 @@ class OdometryRuntime:
         except AtsvoError as exc:
             self._problems.report("images_rejected", f"{topic}: depth image at {stamp_text(msg)} skipped: {exc}")
 
+    def skip_input(self, kind: str, text: str) -> None:
+        """An input the source could not read (a missing or corrupt file): counted and reported like a bad message."""
+        self._problems.report(kind, text)
+
     def add_events(self, batch: EventBatch, complete_to_ns: int | None = None) -> None:
         """A decoded, time-ordered event batch; ``complete_to_ns``: its message's header stamp (the stream is
         known complete up to there). The times are put on the colour images' clock first (:class:`EventClock`)."""

@@ -2,10 +2,13 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
-from atsvo_ros.errors import AtsvoError
+from atsvo_ros.errors import AtsvoError, OutputError
 
 
 def run(main: Callable[[argparse.Namespace], int | None], parser: argparse.ArgumentParser,
@@ -24,7 +27,44 @@ def run(main: Callable[[argparse.Namespace], int | None], parser: argparse.Argum
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `atsvo-eval ... | head`: the reader left; not an error of ours
+        _silence_stdout()
+        return 0
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _silence_stdout()
     return int(code or 0)
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so Python's exit flush does not raise again on the closed pipe."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+
+
+def prepare_out_dir(path: str | Path, what: str = "--out") -> Path:
+    """Create the output folder ``path`` now and prove it writable, before any long work starts.
+
+    Raises:
+        OutputError: one line naming the problem: a file where the folder (or a parent) should be,
+            no permission, a read-only file system.
+    """
+    out = Path(path)
+    for parent in [out, *out.parents]:
+        if parent.exists():
+            if not parent.is_dir():
+                where = "is" if parent == out else f"is under {parent}, which is"
+                raise OutputError(f"{what} {out} {where} a file, not a folder")
+            break
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise OutputError(f"{what} {out} is not writable: {exc.strerror or exc}") from None
+    return out
 
 
 def add_config_args(parser: argparse.ArgumentParser, default: str | None = None) -> None:

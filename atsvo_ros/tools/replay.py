@@ -38,7 +38,7 @@ from atsvo_ros.io.record import BagRecorder, check_record_path
 from atsvo_ros.io.sources import detect_preset, open_source
 from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
 from atsvo_ros.runtime.runtime import OdometryRuntime
-from atsvo_ros.tools._cli import add_config_args, run
+from atsvo_ros.tools._cli import add_config_args, prepare_out_dir, run
 
 TOPIC_FLAGS = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")
 
@@ -115,12 +115,12 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
 
     if frame not in (None, "base", "camera"):
         raise ConfigError(f"--frame must be base or camera, got {frame!r}")
+    paths = [Path(bag_path)] if isinstance(bag_path, (str, Path)) else [Path(p) for p in bag_path]
     if record is not None:
-        check_record_path(record, force)  # before the run, not after it
-    out = Path(out_dir)
+        check_record_path(record, force, inputs=paths)  # before the run, not after it
+    out = prepare_out_dir(out_dir)  # an unusable --out fails now, not after the whole bag
     notes: list[str] = []
     gt_file = read_tum(gt_path) if gt_path else None
-    paths = [Path(bag_path)] if isinstance(bag_path, (str, Path)) else [Path(p) for p in bag_path]
     name = " + ".join(p.name for p in paths)
     source = open_source(paths, topics, config)
     log_lines: list[str] = []
@@ -177,6 +177,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         dec_stats = {**source.decoder_stats(), **runtime.decoder_stats}
         read_stats, read_notes = source.read_problems()
         notes.extend(read_notes)
+        notes.extend(_decoder_notes(dec_stats))
         notes.extend(_counter_notes(runtime))
         record_counts: dict[str, int] = {}
         if recorder is not None and outputs:
@@ -194,12 +195,12 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     if not outputs:
         if recorder is not None:
             recorder.abort()
-        first = runtime.first_problem.get("images_rejected")
+        problems = _counter_notes(runtime)
+        if problems:  # the frames were formed but refused: say why, not "no pair"
+            raise BagError(f"no frame of {name} could be used: " + "; ".join(problems))
         raise BagError(f"no colour/depth pair could be formed from {name} (sync tolerance "
                        f"{config.rig.sync_tolerance_s} s; dropped {sync_stats['dropped_rgb']} colour and "
-                       f"{sync_stats['dropped_depth']} depth images"
-                       + (f"; {runtime.counters['images_rejected']} images could not be decoded, first: {first})"
-                          if first else ")"))
+                       f"{sync_stats['dropped_depth']} depth images)")
     used_mode = "fused" if use_events and any(o.n_events for o in outputs) else "rgbd"
     if use_events and used_mode == "rgbd":
         notes.append("warning: RGB-D only: the bag has events, but not one reached a frame (see the warnings)")
@@ -210,7 +211,6 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
                                     for r in results]),
                           statuses, np.array([r.tracking_time_s for r in results]), wall, bag_duration, notes=notes,
                           record_path=Path(record) if record is not None else None, record_counts=record_counts)
-    out.mkdir(parents=True, exist_ok=True)
     est = Trajectory(result.stamps_ns, result.T_odom_x)
     write_tum(out / "trajectory.tum", est, header=f"atsvo-replay {name} mode={used_mode} "
               f"frame={'base' if frame == 'base' else 'colour optical'} (T_odom_{frame})")
@@ -266,9 +266,29 @@ def _ground_truth(gt_file: Any, gt_samples: list | None) -> Any:
                       np.stack([g[1] for g in gt_samples])).sorted_unique()
 
 
+def _decoder_notes(dec_stats: dict[str, Any]) -> list[str]:
+    """One warning per event topic that lost events in decoding, with the totals (the log shows the first only)."""
+    notes = []
+    for topic, st in dec_stats.items():
+        if not isinstance(st, dict):
+            continue
+        why = {"outside the sensor": st.get("dropped_out_of_range", 0),
+               "time went backwards": st.get("dropped_backwards", 0),
+               **{k.replace("_", " "): v for k, v in (st.get("dropped_by_kind") or {}).items()}}
+        why = {k: int(v) for k, v in why.items() if v}
+        lost = sum(why.values())
+        if lost or st.get("dropped_messages"):
+            size = f" (sensor {st['width']}x{st['height']})" if st.get("width") else ""
+            kept = int(st.get("n_events", 0))
+            notes.append(f"warning: {topic}: {lost:,} of {lost + kept:,} events dropped in decoding{size}: "
+                         + ", ".join(f"{k} {v:,}" for k, v in why.items())
+                         + (f"; {st['dropped_messages']:,} messages undecodable" if st.get("dropped_messages") else ""))
+    return notes
+
+
 def _counter_notes(runtime: Any) -> list[str]:
     """One note per kind of skipped input, with the first message of that kind."""
-    labels = {"images_rejected": "undecodable images skipped", "frames_duplicate": "duplicated frames skipped",
+    labels = {"images_rejected": "unreadable images skipped", "frames_duplicate": "duplicated frames skipped",
               "frames_out_of_order": "out-of-order frames skipped", "frames_failed": "frames the core rejected",
               "clock_jumps": "clock jumps (motion model reset)", "imu_rejected": "unusable IMU messages skipped",
               "frames_waiting_camera_info": "frames before the first camera_info",

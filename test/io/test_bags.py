@@ -210,6 +210,26 @@ def test_explicit_topics_override_and_unknown_topic_named(bags):
         Bag(bags["mcap"], topics={"rgb": "/nope"})
 
 
+@pytest.mark.parametrize("role, topic, words", [
+    ("ground_truth", "/tf_static", "--ground-truth-topic /tf_static is a tf2_msgs/msg/TFMessage topic"),
+    ("ground_truth", "rgb", "must be one of: geometry_msgs/msg/PoseStamped"),
+    ("ground_truth", "imu", "is a sensor_msgs/msg/Imu topic"),
+    ("rgb_info", "rgb", "--rgb-info-topic .* is a sensor_msgs/msg/Image topic; it must be one of: sensor_msgs"),
+    ("imu", "depth", "--imu-topic"),
+])
+def test_a_topic_of_the_wrong_type_is_one_line_not_a_traceback(role, topic, words):
+    """r10: --ground-truth-topic /tf_static, an image as camera_info, the IMU as ground truth."""
+    topics = {"/rgb": "sensor_msgs/msg/Image", "/depth": "sensor_msgs/msg/Image", "/imu": "sensor_msgs/msg/Imu",
+              "/tf_static": "tf2_msgs/msg/TFMessage", "/info": "sensor_msgs/msg/CameraInfo"}
+    name = topic if topic.startswith("/") else f"/{topic}"
+    with pytest.raises(BagError, match=words):
+        resolve_topics(topics, {role: name}, presets=())
+    with pytest.raises(BagError, match="given for both rgb and depth"):
+        resolve_topics(topics, {"rgb": "/rgb", "depth": "/rgb"}, presets=())
+    sel = resolve_topics(topics, {"rgb": "/rgb", "depth": "/depth", "rgb_info": "/info"}, presets=())
+    assert (sel.rgb, sel.depth, sel.rgb_info, sel.imu) == ("/rgb", "/depth", "/info", "/imu")
+
+
 def test_detection_by_type_for_unknown_names():
     topics = {"/cam/color/img": "sensor_msgs/msg/Image", "/cam/depth/img": "sensor_msgs/msg/Image",
               "/cam/color/camera_info": "sensor_msgs/msg/CameraInfo", "/ev": "dvs_msgs/msg/EventArray",

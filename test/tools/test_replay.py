@@ -227,7 +227,7 @@ def test_damaged_frames_are_skipped_counted_and_reported_not_fatal(tmp_path, cap
     assert counters["images_rejected"] == 1 and counters["frames_duplicate"] == 1
     assert counters["frames_out_of_order"] == 1 and counters["frames"] == 10  # 12 - undecodable - late
     notes = "\n".join(res.notes)
-    for what in ("undecodable images skipped", "duplicated frames skipped", "out-of-order frames skipped"):
+    for what in ("unreadable images skipped", "duplicated frames skipped", "out-of-order frames skipped"):
         assert what in notes
     assert "bayer_rggb8" in notes and "/camera/camera/color/image_raw" in notes  # topic and reason named
     assert len(read_tum(tmp_path / "out" / "trajectory.tum")) == 10

@@ -118,7 +118,8 @@ class RgbdFrontEnd(ImageFrontEnd):
         depth = np.asarray(frame.depth_m)
         if depth.shape != grey.shape:
             raise ImageError(f"depth image shape {depth.shape} differs from the colour image {grey.shape}: "
-                             "the depth must be aligned to colour")
+                             "the depth must be aligned to colour (on a RealSense: aligned_depth_to_color/image_raw, "
+                             "not depth/image_rect_raw)")
         if depth.dtype.kind != "f":
             raise ImageError(f"depth must be float metres, got {depth.dtype} (convert 16UC1 millimetres first)")
         depth = depth.astype(np.float32, copy=False)
