@@ -23,10 +23,12 @@ from typing import Any
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
+from atsvo_ros.config import TopicsConfig
 from atsvo_ros.errors import AtsvoError
 
 SENSOR_QOS = qos_profile_sensor_data
@@ -167,8 +169,39 @@ def make_executor(kind: str, threads: int = 2) -> Any:
     return SingleThreadedExecutor()
 
 
+_HELP = """usage: {prog} [--ros-args [--params-file FILE] [-p NAME:=VALUE] [-r FROM:=TO] ...]
+
+{what}
+
+Parameters are the configuration's keys (e.g. -p ats.tau_u_s:=0.05, -p topics.rgb:=/my/image); a
+parameter file is ROS's YAML (/**: ros__parameters: ...). Bundled files: config/mini_cheetah.yaml
+(the robot), config/synthetic.yaml (atsvo-sim's bags), config/mvsec.yaml, config/tum_fr1-3.yaml.
+Inputs (defaults): colour {rgb}
+depth {depth}, events {events}, IMU {imu}
+Output: nav_msgs/Odometry on {odometry}.
+Without ROS: atsvo-play BAG feeds recorded topics; atsvo-replay BAG runs the same pipeline offline.
+Docs: docs/nodes.md.
+"""
+
+
+def _preflight(prog: str, what: str, argv: Sequence[str]) -> int | None:
+    """``--help`` before ``--ros-args`` prints the usage; a missing ``--params-file`` is one line. None: go on."""
+    argv = list(argv)
+    user = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
+    if "-h" in user or "--help" in user:
+        t = TopicsConfig()
+        print(_HELP.format(prog=prog, what=what, rgb=t.rgb, depth=t.depth, events=t.events, imu=t.imu,
+                           odometry=t.odometry))
+        return 0
+    for i, a in enumerate(argv[:-1]):
+        if a == "--params-file" and not os.path.isfile(argv[i + 1]):
+            print(f"{prog}: error: --params-file {argv[i + 1]}: no such file", file=sys.stderr)
+            return 1
+    return None
+
+
 def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | None = None,
-              threads: int = 2) -> int:
+              threads: int = 2, what: str = "") -> int:
     """Init rclpy, build the nodes, spin until Ctrl-C / shutdown, clean up; the process's exit code.
 
     The executor is the nodes' ``node.executor`` parameter (``threads`` for the multi-threaded one). A
@@ -176,8 +209,16 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
     Ctrl-C and external shutdowns end it with 0. A bug in a worker thread (reported through
     ``node.fatal_error``) ends it with 1 after its traceback was logged.
     """
+    argv = args if args is not None else sys.argv
+    early = _preflight(prog, what, argv)
+    if early is not None:
+        return early
     sys.setswitchinterval(float(os.environ.get("ATSVO_SWITCH_S", sys.getswitchinterval())))
-    rclpy.init(args=args if args is not None else sys.argv)
+    try:
+        rclpy.init(args=argv)
+    except RCLError as exc:  # a ROS argument rcl cannot parse (a broken parameter file): one line, not a traceback
+        print(f"{prog}: error: {str(exc).strip().splitlines()[-1]}", file=sys.stderr)
+        return 1
     nodes: list[Node] = []
     code = 0
     try:

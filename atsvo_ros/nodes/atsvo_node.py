@@ -24,7 +24,8 @@ def _make() -> list[Node]:
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``atsvo_node`` / ``ros2 run atsvo_ros atsvo_node``."""
-    return run_nodes("atsvo_node", _make, args, threads=3)
+    return run_nodes("atsvo_node", _make, args, threads=3,
+                     what="Visual odometry (RGB-D + events) with tracking and mapping in one process.")
 
 
 if __name__ == "__main__":

@@ -117,7 +117,8 @@ class MappingNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """``ros2 run atsvo_ros mapping_node`` (serves ``tracking_node``)."""
-    return run_nodes("mapping_node", lambda: [MappingNode(serve=True)], args)
+    return run_nodes("mapping_node", lambda: [MappingNode(serve=True)], args,
+                     what="The mapping half of the PTAM split: keyframes and the event map for tracking_node.")
 
 
 if __name__ == "__main__":

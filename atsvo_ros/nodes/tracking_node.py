@@ -432,7 +432,8 @@ class TrackingNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """``ros2 run atsvo_ros tracking_node`` (with ``mapping_node``; ``atsvo_node`` runs both in one process)."""
-    return run_nodes("tracking_node", lambda: [TrackingNode(mapping="topics")], args)
+    return run_nodes("tracking_node", lambda: [TrackingNode(mapping="topics")], args,
+                     what="The tracking half of the PTAM split (run mapping_node beside it); publishes the odometry.")
 
 
 if __name__ == "__main__":

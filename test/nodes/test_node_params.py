@@ -101,3 +101,28 @@ def test_launch_file_starts_the_installed_executables():
     assert executables == {"atsvo_node", "tracking_node", "mapping_node"}
     for exe in executables:
         assert f'"{exe} = atsvo_ros.nodes.' in setup
+
+
+@pytest.mark.parametrize("prog", ["atsvo_node", "tracking_node", "mapping_node"])
+def test_help_prints_usage_and_does_not_start_the_node(prog, capsys):
+    import importlib
+
+    main = importlib.import_module(f"atsvo_ros.nodes.{prog}").main
+    assert main([prog, "--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: {prog} [--ros-args") and "/atsvo/odometry" in out and "docs/nodes.md" in out
+    assert not rclpy.ok()  # never initialised: the node did not start
+
+
+def test_missing_or_broken_params_file_is_one_line(tmp_path, capsys):
+    from atsvo_ros.nodes.atsvo_node import main
+
+    missing = tmp_path / "missing.yaml"
+    assert main(["atsvo_node", "--ros-args", "--params-file", str(missing)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"atsvo_node: error: --params-file {missing}: no such file"]
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("/**:\n  ros__parameters:\n    a: [1, 2\n")
+    assert main(["atsvo_node", "--ros-args", "--params-file", str(broken)]) == 1
+    err = capsys.readouterr().err
+    assert "atsvo_node: error: failed to initialize rcl: Couldn't parse params file" in err and "Traceback" not in err
