@@ -7,6 +7,7 @@ metadata, and a bad value raises :class:`ConfigError` naming the key, the value 
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 import typing
 from collections.abc import Sequence
@@ -401,6 +402,66 @@ class AtsvoConfig:
 # ---------------------------------------------------------------------------- loading
 
 
+class _ConfigLoader(yaml.SafeLoader):
+    """SafeLoader that refuses what a parameter file never needs and YAML would accept silently.
+
+    A repeated mapping key (PyYAML keeps the last one: a stray ``fx: 38.2`` wins) and aliases (``*a``:
+    a dozen lines of nested aliases expand to billions of nodes) raise a one-line :class:`ConfigError`.
+    """
+
+    config_source = "config"  # names the text in messages: ``config <path>`` or ``--set 'key=value'``
+    config_prefix = ""  # dotted key of the text's top level (the --set key)
+    config_numbered = True  # messages give lines (a file) or columns (a one-line --set value)
+
+    def _at(self, mark: yaml.Mark) -> str:
+        return f"line {mark.line + 1}" if self.config_numbered else f"column {mark.column + 1}"
+
+    def _problem(self, mark: yaml.Mark, text: str) -> ConfigError:
+        where = f"{self.config_source}:{mark.line + 1}" if self.config_numbered else self.config_source
+        return ConfigError(f"{where}: {text}")
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
+        if self.check_event(yaml.AliasEvent):  # refused before the composer resolves (and shares) it
+            event = self.peek_event()
+            raise self._problem(event.start_mark, f"YAML alias *{event.anchor} is not allowed in a config "
+                                                  "(write the value out)")
+        return super().compose_node(parent, index)
+
+    def construct_document(self, node: yaml.Node) -> Any:
+        self._check_duplicates(node, self.config_prefix)
+        return super().construct_document(node)
+
+    def _check_duplicates(self, node: yaml.Node, path: str) -> None:
+        """Raise on a key repeated in one mapping, named by its dotted path below ``ros__parameters``."""
+        if isinstance(node, yaml.SequenceNode):
+            for item in node.value:
+                self._check_duplicates(item, path)
+        if not isinstance(node, yaml.MappingNode):
+            return
+        first: dict[tuple[str, str], yaml.Mark] = {}
+        for key_node, value_node in node.value:
+            name = str(key_node.value) if isinstance(key_node, yaml.ScalarNode) else "?"
+            if isinstance(key_node, yaml.ScalarNode):
+                seen = first.setdefault((key_node.tag, name), key_node.start_mark)
+                if seen is not key_node.start_mark:
+                    raise self._problem(key_node.start_mark, f"duplicate key {path}{name} (first at "
+                                                             f"{self._at(seen)}; YAML would keep only the last)")
+            self._check_duplicates(value_node, "" if name == "ros__parameters" else f"{path}{name}.")
+
+
+def _safe_load(text: str, source: str, prefix: str = "") -> Any:
+    """``yaml.safe_load`` that rejects duplicate keys and aliases, naming ``source`` and the line.
+
+    ``prefix`` (a --set key, ``rgb_camera.``) is put before the keys named, and turns lines into columns.
+    """
+    loader = _ConfigLoader(text)
+    loader.config_source, loader.config_prefix, loader.config_numbered = source, prefix, not prefix
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
 def _field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
@@ -414,6 +475,9 @@ def _coerce(key: str, value: Any, typ: Any, f: dataclasses.Field) -> Any:
             if not isinstance(value, (list, tuple)):
                 raise TypeError("expected a list")
             out: Any = tuple(float(v) for v in value)
+            for i, v in enumerate(out):
+                if not math.isfinite(v):
+                    raise ConfigError(f"{key}[{i}] is {v} (every element must be a finite number)")
             default = f.default_factory() if f.default_factory is not dataclasses.MISSING else ()
             if key.split(".")[-1].startswith("T_") and len(out) != 16:
                 raise ConfigError(f"{key} = {value!r} must be a row-major 4x4 matrix (16 numbers)")
@@ -440,19 +504,29 @@ def _coerce(key: str, value: Any, typ: Any, f: dataclasses.Field) -> Any:
             out = value
     except ConfigError:
         raise
+    except OverflowError:  # an integer beyond a float's range (10**400)
+        raise ConfigError(f"{key} = {value!r} is out of range: {_allowed(meta) or 'too large for a number'}") from None
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{key} = {value!r} has the wrong type: {exc}") from None
     if meta.get("choices") and out not in meta["choices"]:
         raise ConfigError(f"{key} = {value!r} is not allowed (choose one of {', '.join(meta['choices'])})")
     lo, hi = meta.get("lo"), meta.get("hi")
     if isinstance(out, (int, float)) and (lo is not None or hi is not None):
-        bad = (not np.isfinite(out)
+        # math.isfinite, not np.isfinite: a Python int beyond int64 (1e32 written out) is no numpy number
+        bad = ((isinstance(out, float) and not math.isfinite(out))
                or (lo is not None and (out <= lo if meta.get("lo_open") else out < lo))
                or (hi is not None and out > hi))
         if bad:
-            left = "(" if meta.get("lo_open") else "["
-            raise ConfigError(f"{key} = {value!r} is out of range: allowed {left}{lo}, {hi}]")
+            raise ConfigError(f"{key} = {value!r} is out of range: {_allowed(meta)}")
     return out
+
+
+def _allowed(meta: typing.Mapping[str, Any]) -> str:
+    """The allowed range of a field as the messages show it (``allowed (0.0, 10.0]``), empty without one."""
+    lo, hi = meta.get("lo"), meta.get("hi")
+    if lo is None and hi is None:
+        return ""
+    return f"allowed {'(' if meta.get('lo_open') else '['}{lo}, {hi}]"
 
 
 def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
@@ -566,7 +640,7 @@ def parse_overrides(pairs: Sequence[str]) -> dict[str, object]:
     """``['ats.tau_u_s=0.05']`` -> ``{'ats.tau_u_s': 0.05}`` (the command lines' ``--set``; values are YAML).
 
     Raises:
-        ConfigError: A pair without ``=`` or a value that is not valid YAML.
+        ConfigError: A pair without ``=`` or a value that is not valid YAML, repeats a key or uses an alias.
     """
     out: dict[str, object] = {}
     for pair in pairs:
@@ -574,7 +648,7 @@ def parse_overrides(pairs: Sequence[str]) -> dict[str, object]:
         if not sep or not key:
             raise ConfigError(f"--set expects KEY=VALUE, got {pair!r}")
         try:
-            out[key.strip()] = yaml.safe_load(value)
+            out[key.strip()] = _safe_load(value, f"--set {pair!r}", f"{key.strip()}.")
         except yaml.YAMLError as exc:
             raise ConfigError(f"--set {pair!r}: the value is not valid YAML "
                               f"({str(exc).splitlines()[0]})") from exc
@@ -593,7 +667,7 @@ def load_config(path: str | Path | None = None, node_name: str | None = None,
         p = resolve_config_path(path)
         try:
             data = p.read_bytes()
-            document = yaml.safe_load(data.decode("utf-8"))
+            document = _safe_load(data.decode("utf-8"), f"config {p}")
         except OSError as exc:
             raise ConfigError(f"cannot read config {p}: {exc.strerror or exc}") from None
         except UnicodeDecodeError as exc:
@@ -642,6 +716,8 @@ def resolve_config_path(path: str | Path) -> Path:
     preset = config_dir() / f"{Path(str(path)).stem}.yaml"
     if preset.is_file() and not p.suffix:
         return preset
+    if p.is_dir():
+        raise ConfigError(f"config file {path} is a directory, not a ROS-parameter YAML file")
     raise ConfigError(f"config file {path} not found (bundled presets: "
                       f"{', '.join(sorted(q.stem for q in config_dir().glob('*.yaml')))})")
 

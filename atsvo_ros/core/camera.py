@@ -7,6 +7,7 @@ ROS camera_calibration YAML, or from a plain dict. Projection maps camera-frame 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from atsvo_ros.config import CameraConfig
 from atsvo_ros.errors import CalibrationError
 
 _N_COEFFS = {"none": 0, "plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
+_K_NAMES = {0: "fx", 2: "cx", 4: "fy", 5: "cy"}  # row-major K entries by name, for messages
 _ALIASES = {"": "none", "pinhole": "none", "radtan": "plumb_bob", "fisheye": "equidistant",
             "kannala_brandt": "equidistant", "equi": "equidistant"}
 
@@ -42,6 +44,10 @@ class CameraModel:
                 f"distortion_model {self.distortion_model!r} is not supported "
                 f"(allowed: {', '.join(sorted(_N_COEFFS))})")
         d = tuple(float(v) for v in self.D)
+        bad = [f"{name}={v}" for name, v in (("fx", self.fx), ("fy", self.fy), ("cx", self.cx), ("cy", self.cy))
+               + tuple((f"D[{i}]", v) for i, v in enumerate(d)) if not math.isfinite(v)]
+        if bad:  # first: a NaN passes some of the checks below and fails others, blaming the wrong value
+            raise CalibrationError(f"intrinsics and distortion must be finite, got {', '.join(bad)}")
         n = _N_COEFFS[model]
         if len(d) > n and any(abs(v) > 0 for v in d[n:]):
             raise CalibrationError(f"{model} takes {n} coefficients, got {len(d)}: {d}")
@@ -52,7 +58,7 @@ class CameraModel:
         object.__setattr__(self, "D", d)
         if self.width <= 0 or self.height <= 0:
             raise CalibrationError(f"image size must be positive, got {self.width}x{self.height}")
-        if not (self.fx > 0 and self.fy > 0 and np.isfinite([self.cx, self.cy]).all()):
+        if not (self.fx > 0 and self.fy > 0):
             raise CalibrationError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
 
     # ------------------------------------------------------------------ construction
@@ -63,11 +69,21 @@ class CameraModel:
 
     @classmethod
     def from_camera_info(cls, msg: Any) -> CameraModel:
-        """Build from a sensor_msgs/CameraInfo (rclpy, rosbags ROS 1 or ROS 2 classes)."""
-        K = np.asarray(getattr(msg, "k", None) if hasattr(msg, "k") else msg.K, dtype=np.float64)
-        D = np.asarray(getattr(msg, "d", None) if hasattr(msg, "d") else msg.D, dtype=np.float64)
+        """Build from a sensor_msgs/CameraInfo (rclpy, rosbags ROS 1 or ROS 2 classes).
+
+        Raises:
+            CalibrationError: K is missing or fx is not positive, or K or D hold NaN/inf (the message names the entries;
+                callers prefix the topic).
+        """
+        K = np.asarray(getattr(msg, "k", None) if hasattr(msg, "k") else msg.K, dtype=np.float64).reshape(-1)
+        D = np.asarray(getattr(msg, "d", None) if hasattr(msg, "d") else msg.D, dtype=np.float64).reshape(-1)
         if K.size != 9 or K[0] <= 0:
             raise CalibrationError("CameraInfo has no valid K matrix (uncalibrated camera?)")
+        for name, values, labels in (("K", K, _K_NAMES), ("D", D, {})):
+            bad = [f"{labels.get(i, f'{name}[{i}]')}={v}" for i, v in enumerate(values.tolist())
+                   if not math.isfinite(v)]
+            if bad:
+                raise CalibrationError(f"{name} has non-finite values ({', '.join(bad)})")
         return cls(int(msg.width), int(msg.height), float(K[0]), float(K[4]), float(K[2]),
                    float(K[5]), str(msg.distortion_model or "none"), tuple(D.tolist()))
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.errors import BagError, TransformError
+from atsvo_ros.errors import BagError, CalibrationError, TransformError
 from atsvo_ros.io.bags import Bag, StaticTf, pose_from_msg
 from atsvo_ros.io.images import depth_to_metres, stamp_ns
 from atsvo_ros.io.mvsec import MvsecReader
@@ -76,16 +76,28 @@ def _flat(T: np.ndarray) -> tuple[float, ...]:
     return tuple(float(v) for v in np.asarray(T).reshape(-1))
 
 
-def _cameras(cfg: AtsvoConfig, first: dict[str, Any], notes: list[str]) -> tuple[CameraModel, CameraModel]:
-    """Colour / event camera models: camera_info when present and allowed, else the config."""
+def _cameras(cfg: AtsvoConfig, first: dict[str, Any], notes: list[str],
+             topics: dict[str, str | None] | None = None) -> tuple[CameraModel, CameraModel]:
+    """Colour / event camera models: camera_info when present and allowed, else the config.
+
+    ``topics`` (role -> topic) names the camera_info topic in a :class:`CalibrationError` (NaN in K or D).
+    """
     rgb_cam = CameraModel.from_config(cfg.rgb_camera)
     if cfg.rgb_camera.use_camera_info and "rgb_info" in first:
-        rgb_cam = CameraModel.from_camera_info(first["rgb_info"])
+        rgb_cam = _camera_from_info(first["rgb_info"], (topics or {}).get("rgb_info") or "rgb_info")
         notes.append("colour intrinsics from camera_info")
     ev_cam = CameraModel.from_config(cfg.event_camera)
     if cfg.event_camera.use_camera_info and "event_info" in first:
-        ev_cam = CameraModel.from_camera_info(first["event_info"])
+        ev_cam = _camera_from_info(first["event_info"], (topics or {}).get("event_info") or "event_info")
     return rgb_cam, ev_cam
+
+
+def _camera_from_info(msg: Any, topic: str) -> CameraModel:
+    """:meth:`CameraModel.from_camera_info`, its error naming the topic the message came from."""
+    try:
+        return CameraModel.from_camera_info(msg)
+    except CalibrationError as exc:
+        raise CalibrationError(f"camera_info on {topic}: {exc}") from None
 
 
 def _extrinsics(cfg: AtsvoConfig, bag: Any, first: dict[str, Any], notes: list[str]) -> AtsvoConfig:
@@ -139,7 +151,7 @@ class BagSource:
     def setup(self, config: AtsvoConfig, notes: list[str]) -> tuple[AtsvoConfig, CameraModel, CameraModel]:
         first = self.bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events", "imu"])
         config = _extrinsics(config, self.bag, first, notes)
-        return (config, *_cameras(config, first, notes))
+        return (config, *_cameras(config, first, notes, dict(self.bag.selection.items())))
 
     def feed(self, sink: SensorSink, roles: tuple[str, ...], gt: list | None) -> Iterator[None]:
         """Generator: one message of ``roles`` into ``sink`` per step (ground truth into ``gt``)."""

@@ -121,3 +121,39 @@ def test_scaled_model_follows_pixel_centre_convention():
     cam = CameraModel(640, 480, 400.0, 400.0, 319.5, 239.5)
     half = cam.scaled(0.5)
     assert (half.width, half.height, half.fx, half.cx) == (320, 240, 200.0, 159.5)
+
+
+def _sim_camera_info(k2: float = 160.0, d0: float = 0.0):
+    """The simulator's colour camera_info (320x240, f = 191 px) as rosbags decodes it, as r08 mutates it."""
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    T = ts.types
+    return T["sensor_msgs/msg/CameraInfo"](
+        T["std_msgs/msg/Header"](T["builtin_interfaces/msg/Time"](0, 0), "cam"), 240, 320, "plumb_bob",
+        np.array([d0, 0, 0, 0, 0], np.float64), np.array([191.0, 0, k2, 0, 191.0, 120.0, 0, 0, 1]),
+        np.eye(3).ravel(), np.zeros(12), 0, 0, T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False))
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"k2": np.nan}, "K has non-finite values (cx=nan)"),
+    ({"d0": np.nan}, "D has non-finite values (D[0]=nan)"),
+    ({"k2": np.inf, "d0": -np.inf}, "K has non-finite values (cx=inf)"),
+], ids=["r08_nan_cx", "r08_nan_d", "inf"])
+def test_non_finite_camera_info_names_the_entry(kwargs, message):
+    with pytest.raises(CalibrationError) as info:
+        CameraModel.from_camera_info(_sim_camera_info(**kwargs))
+    assert str(info.value) == message
+    assert CameraModel.from_camera_info(_sim_camera_info()).cx == 160.0
+
+
+@pytest.mark.parametrize("args, message", [
+    ((320, 240, 191.0, 191.0, np.nan, 120.0), "intrinsics and distortion must be finite, got cx=nan"),
+    ((320, 240, np.nan, 191.0, 160.0, 120.0), "intrinsics and distortion must be finite, got fx=nan"),
+    ((320, 240, 191.0, 191.0, 160.0, 120.0, "plumb_bob", (0.0, np.nan, 0.0, 0.0, 0.0)),
+     "intrinsics and distortion must be finite, got D[1]=nan"),
+])
+def test_non_finite_intrinsics_are_named_not_blamed_on_the_focal_length(args, message):
+    with pytest.raises(CalibrationError) as info:
+        CameraModel(*args)
+    assert str(info.value) == message
