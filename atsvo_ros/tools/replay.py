@@ -30,6 +30,7 @@ import numpy as np
 from tqdm import tqdm
 
 from atsvo_ros.config import AtsvoConfig, config_dir, load_config, parse_overrides
+from atsvo_ros.core.frame import TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.errors import BagError, ConfigError, TrackingError
 from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics
@@ -39,6 +40,7 @@ from atsvo_ros.io.sources import detect_preset, open_source
 from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.tools._cli import add_config_args, prepare_out_dir, run
+from atsvo_ros.tools.replay_log import FrameLog, PoseLog
 
 TOPIC_FLAGS = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")
 
@@ -153,15 +155,15 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         use_events = runtime.use_events
         if mode == "fused" and not use_events:
             notes.append("RGB-D only: the bag has no event topic")
-        outputs: list = []
-        gt_samples: list | None = [] if gt_file is None and source.has("ground_truth") else None
+        outputs = FrameLog("base" if frame == "base" else "camera")
+        gt_samples = PoseLog() if gt_file is None and source.has("ground_truth") else None
         t_wall0 = time.perf_counter()
 
         def collect(batch: list) -> None:
             for o in batch:
                 outputs.append(o)
                 wall = time.perf_counter() - t_wall0
-                span = (o.result.stamp_ns - outputs[0].result.stamp_ns) * 1e-9
+                span = (o.result.stamp_ns - outputs.first_stamp_ns) * 1e-9
                 bar.update(1)
                 bar.set_postfix(rtf=f"{span / wall:.2f}" if wall > 0 else "-", status=o.result.status.value,
                                 refresh=False)
@@ -192,7 +194,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         raise
     finally:
         source.close()
-    if not outputs:
+    if not len(outputs):
         if recorder is not None:
             recorder.abort()
         problems = _counter_notes(runtime)
@@ -201,15 +203,12 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         raise BagError(f"no colour/depth pair could be formed from {name} (sync tolerance "
                        f"{config.rig.sync_tolerance_s} s; dropped {sync_stats['dropped_rgb']} colour and "
                        f"{sync_stats['dropped_depth']} depth images)")
-    used_mode = "fused" if use_events and any(o.n_events for o in outputs) else "rgbd"
+    used_mode = "fused" if use_events and outputs["n_events"].any() else "rgbd"
     if use_events and used_mode == "rgbd":
         notes.append("warning: RGB-D only: the bag has events, but not one reached a frame (see the warnings)")
-    results = [o.result for o in outputs]
-    statuses = [r.status.value for r in results]
-    result = ReplayResult(out, used_mode, np.array([r.stamp_ns for r in results], np.int64),
-                          np.stack([np.asarray(r.T_odom_base if frame == "base" else r.T_odom_camera, np.float64)
-                                    for r in results]),
-                          statuses, np.array([r.tracking_time_s for r in results]), wall, bag_duration, notes=notes,
+    statuses = list(outputs.statuses)
+    result = ReplayResult(out, used_mode, outputs["stamp_ns"].copy(), outputs.poses, statuses,
+                          outputs["tracking_time_s"].copy(), wall, bag_duration, notes=notes,
                           record_path=Path(record) if record is not None else None, record_counts=record_counts)
     est = Trajectory(result.stamps_ns, result.T_odom_x)
     write_tum(out / "trajectory.tum", est, header=f"atsvo-replay {name} mode={used_mode} "
@@ -218,19 +217,14 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     slow = slow_tracking_warning(tt, rgb_cam.width, rgb_cam.height, used_mode)
     if slow:
         notes.append("warning: " + slow)
-    frames_info = [{"stamp_ns": int(r.stamp_ns), "tracking_time_s": float(r.tracking_time_s), "mode": r.mode,
-                    "status": r.status.value, "reason": r.reason, "n_points": int(r.n_points),
-                    "n_inliers": int(r.n_inliers), "inliers": dict(r.inliers), "keyframe": bool(r.keyframe_inserted),
-                    "n_events": int(o.n_events), "event_map_time_s": float(r.event_map_time_s)}
-                   for o, r in zip(outputs, results)]
-    timing = {"mode": used_mode, "frame": frame, "n_frames": len(results), "wall_time_s": wall,
+    timing = {"mode": used_mode, "frame": frame, "n_frames": len(outputs), "wall_time_s": wall,
               "bag_duration_s": bag_duration, "real_time_factor": result.real_time_factor,
               "tracking_time_mean_s": float(np.mean(tt)), "tracking_time_median_s": float(np.median(tt)),
               "tracking_time_p95_s": float(np.percentile(tt, 95)), "tracking_time_max_s": float(np.max(tt)),
               "status_counts": {s: statuses.count(s) for s in sorted(set(statuses))},
-              "mode_counts": {m: sum(r.mode == m for r in results) for m in sorted({r.mode for r in results})},
+              "mode_counts": {m: outputs.modes.count(m) for m in sorted(set(outputs.modes))},
               "counters": dict(runtime.counters), "sync": sync_stats, "event_decoders": dec_stats,
-              "bag_read": read_stats, "notes": notes, "log": log_lines[-200:], "frames": frames_info}
+              "bag_read": read_stats, "notes": notes, "log": log_lines[-200:], "frames": outputs.frames_info()}
     if record is not None:
         timing["recording"] = {"path": str(record), "messages": record_counts}
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
@@ -247,23 +241,22 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2) + "\n")
     if plots:
         plot_run(out, est, eval_result, title=f"{name} ({used_mode})")
-    if not any(r.status.tracked for r in results):
-        reasons = Counter(r.reason for r in results if r.reason)
+    if not any(TrackingStatus(st).tracked for st in set(statuses)):
+        reasons = Counter(r for r in outputs.reasons if r)
         why = reasons.most_common(1)[0][0] if reasons else "no frame produced a map"
-        raise TrackingError(f"not a single frame of {name} could be tracked ({len(results)} frames): {why}; "
+        raise TrackingError(f"not a single frame of {name} could be tracked ({len(statuses)} frames): {why}; "
                             f"outputs in {out}")
     return result
 
 
-def _ground_truth(gt_file: Any, gt_samples: list | None) -> Any:
+def _ground_truth(gt_file: Any, gt_samples: PoseLog | None) -> Any:
     """The ground truth: the ``--gt`` file, else the bag's pose samples (a Trajectory), else None."""
 
     if gt_file is not None:
         return gt_file
     if not gt_samples:
         return None
-    return Trajectory(np.asarray([g[0] for g in gt_samples], np.int64),
-                      np.stack([g[1] for g in gt_samples])).sorted_unique()
+    return gt_samples.trajectory()
 
 
 def _decoder_notes(dec_stats: dict[str, Any]) -> list[str]:

@@ -239,7 +239,8 @@ def test_cli_without_mcap_storage_and_a_failed_run_leave_nothing(tmp_path, capsy
     bayer = write_bag(tmp_path / "bayer", "mcap", n_frames=3, rgb_encoding="bayer_rggb8")
     rec_dir = tmp_path / "recordings"
     assert main([str(bayer), "--out", str(tmp_path / "out"), "--record", str(rec_dir / "run.mcap")]) == 1
-    assert "no colour/depth pair" in _one_line_error(capsys)
+    err = _one_line_error(capsys)  # the reason, not "no colour/depth pair could be formed"
+    assert "no frame of bayer could be used: 3 unreadable images skipped" in err and "bayer_rggb8" in err
     assert list(rec_dir.iterdir()) == []  # no bag, no staging folder
     monkeypatch.setattr(Writer, "STORAGE_PLUGINS", {k: v for k, v in Writer.STORAGE_PLUGINS.items()
                                                      if k.name != "MCAP"})
