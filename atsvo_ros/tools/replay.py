@@ -20,7 +20,7 @@ import dataclasses
 import json
 import sys
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -125,7 +125,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     gt_file = read_tum(gt_path) if gt_path else None
     name = " + ".join(p.name for p in paths)
     source = open_source(paths, topics, config)
-    log_lines: list[str] = []
+    log_lines: deque[str] = deque(maxlen=200)  # the last log lines go to timing.json; a long run keeps no more
     recorder = None
     try:
         frame = frame or source.default_frame
@@ -224,7 +224,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
               "status_counts": {s: statuses.count(s) for s in sorted(set(statuses))},
               "mode_counts": {m: outputs.modes.count(m) for m in sorted(set(outputs.modes))},
               "counters": dict(runtime.counters), "sync": sync_stats, "event_decoders": dec_stats,
-              "bag_read": read_stats, "notes": notes, "log": log_lines[-200:], "frames": outputs.frames_info()}
+              "bag_read": read_stats, "notes": notes, "log": list(log_lines), "frames": outputs.frames_info()}
     if record is not None:
         timing["recording"] = {"path": str(record), "messages": record_counts}
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
