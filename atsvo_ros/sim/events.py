@@ -40,6 +40,15 @@ from numba import njit
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.errors import SimulationError
 
+#: Largest contrast threshold, in log units (a brightness ratio of e^2 = 7.4; real sensors: 0.1-0.6).
+MAX_CONTRAST = 2.0
+#: Longest pixel reset after an event: 0.1 s (the DVXplorer's: ~220 us; a DAVIS's biases reach a few ms).
+MAX_REFRACTORY_S = 0.1
+#: Most background activity per pixel and second (real sensors: ~0.1 Hz; 100 Hz on 640x480 is 31 M events/s).
+MAX_NOISE_RATE_HZ = 100.0
+#: Slowest readout scan: 10 ms (100 Hz; the DVXplorer scans at ~5 kHz).
+MAX_SCAN_PERIOD_S = 0.01
+
 
 @dataclass(frozen=True)
 class EventModel:
@@ -80,15 +89,26 @@ class EventModel:
     timestamp_resolution_ns: int = 1000
 
     def __post_init__(self) -> None:
-        if min(self.contrast_pos, self.contrast_neg) <= 0 or self.contrast_min <= 0:
-            raise SimulationError("contrast thresholds must be positive")
-        if self.refractory_s < 0 or self.noise_rate_hz < 0 or self.contrast_sigma < 0:
-            raise SimulationError("refractory period, noise rate and threshold sigma must be >= 0")
-        if self.scan_period_s < 0 or self.scan_sweep_s < 0 or (0 < self.scan_period_s < self.scan_sweep_s):
-            raise SimulationError(f"scan period ({self.scan_period_s} s) must be >= 0 and the column sweep "
+        # every test is written so that NaN fails it (a comparison with NaN is False)
+        for name in ("contrast_pos", "contrast_neg", "contrast_min"):
+            if not 0 < getattr(self, name) <= MAX_CONTRAST:
+                raise SimulationError(f"contrast threshold {name} must be in (0, {MAX_CONTRAST:g}] log units (real "
+                                      f"sensors: 0.1-0.6), got {getattr(self, name)}")
+        if not 0 <= self.contrast_sigma <= MAX_CONTRAST:
+            raise SimulationError(f"threshold sigma must be in [0, {MAX_CONTRAST:g}], got {self.contrast_sigma}")
+        if not 0 <= self.refractory_s <= MAX_REFRACTORY_S:
+            raise SimulationError(f"refractory period must be in [0, {MAX_REFRACTORY_S:g}] s (the DVXplorer's: "
+                                  f"~220 us), got {self.refractory_s} s")
+        if not 0 <= self.noise_rate_hz <= MAX_NOISE_RATE_HZ:
+            raise SimulationError(f"noise rate must be in [0, {MAX_NOISE_RATE_HZ:g}] events per pixel and s (real "
+                                  f"sensors: ~0.1), got {self.noise_rate_hz}")
+        if not 0 <= self.scan_period_s <= MAX_SCAN_PERIOD_S or not 0 <= self.scan_sweep_s <= MAX_SCAN_PERIOD_S \
+                or (0 < self.scan_period_s < self.scan_sweep_s):
+            raise SimulationError(f"scan period ({self.scan_period_s} s) must be in [0, {MAX_SCAN_PERIOD_S:g}] s "
+                                  f"(0 = asynchronous; the DVXplorer's: ~200 us) and the column sweep "
                                   f"({self.scan_sweep_s} s) >= 0 and within it")
-        if not 0 < self.max_step_px <= 5 or self.max_render_interval_s <= 0:
-            raise SimulationError("max_step_px must be in (0, 5] px and max_render_interval_s > 0")
+        if not 0 < self.max_step_px <= 5 or not 0 < self.max_render_interval_s <= 1.0:
+            raise SimulationError("max_step_px must be in (0, 5] px and max_render_interval_s in (0, 1] s")
         if self.timestamp_resolution_ns < 1:
             raise SimulationError("timestamp_resolution_ns must be >= 1")
 

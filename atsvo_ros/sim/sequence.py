@@ -51,6 +51,17 @@ from atsvo_ros.sim.stereo import DepthCapture, StereoDepthSensor, StereoModel, d
 LAYOUTS = ("robot", "mvsec")
 DEPTH_MODELS = ("d455", "sharp")
 DEFAULT_START_NS = 1_700_000_000_000_000_000
+#: Longest sequence: an hour. The bag grows by ~20 MB per simulated second at 320x240 (~75 GB an hour) and the
+#: ground truth, event and frame statistics are kept in memory until the end; split longer runs by seed.
+MAX_DURATION_S = 3600.0
+#: Seeds: numpy's SeedSequence takes any integer >= 0; the usual 32-bit range keeps them portable.
+MAX_SEED = 2**32 - 1
+#: Frame rates (colour and ground truth) up to 1 kHz: RGB-D cameras run at <= 90 Hz, motion capture <= 1 kHz.
+MAX_RATE_HZ = 1000.0
+#: Shortest event packet: one tick of the event camera's 1 us clock.
+MIN_EVENT_PACKET_S = 1e-6
+#: Largest texture side: the scene's nine textures of 4096^2 texels with their mip levels take ~1 GB.
+MAX_TEXTURE_SIZE = 4096
 #: Bump whenever the simulator's output for an unchanged spec changes (sensor models, rendering, motion):
 #: caches of generated sequences key on :func:`model_key`. 2: the DVXplorer's scanned readout and pixel reset.
 #: 3: the D455's active-stereo depth with its own exposure time.
@@ -88,10 +99,17 @@ class SequenceSpec:
             raise SimulationError(f"unknown scenario {self.scenario!r} (choose one of {', '.join(SCENARIOS)})")
         if self.layout not in LAYOUTS:
             raise SimulationError(f"unknown layout {self.layout!r} (choose one of {', '.join(LAYOUTS)})")
-        if not self.duration_s > 0 or not self.rate_hz > 0 or not self.gt_rate_hz > 0:
-            raise SimulationError("duration, frame rate and ground-truth rate must be positive")
-        if not 0 < self.event_packet_s <= 1.0:
-            raise SimulationError(f"event packet length must be in (0, 1] s, got {self.event_packet_s}")
+        if not 0 < self.duration_s <= MAX_DURATION_S:
+            raise SimulationError(f"duration must be in (0, {MAX_DURATION_S:g}] s, got {self.duration_s} (the bag "
+                                  "grows by ~20 MB per simulated second at 320x240: split longer runs by seed)")
+        if not isinstance(self.seed, (int, np.integer)) or not 0 <= self.seed <= MAX_SEED:
+            raise SimulationError(f"seed must be an integer in [0, {MAX_SEED}] (2**32 - 1), got {self.seed!r}")
+        for name, rate in (("frame rate", self.rate_hz), ("ground-truth rate", self.gt_rate_hz)):
+            if not 0 < rate <= MAX_RATE_HZ:
+                raise SimulationError(f"{name} must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate}")
+        if not MIN_EVENT_PACKET_S <= self.event_packet_s <= 1.0:
+            raise SimulationError(f"event packet length must be in [{MIN_EVENT_PACKET_S:g}, 1] s (one tick of the "
+                                  f"event clock to a second), got {self.event_packet_s}")
         if not 0.0 < self.exposure_s <= min(0.1, 1.0 / self.rate_hz):
             raise SimulationError(f"exposure {self.exposure_s} s must be positive and fit in one frame "
                                   f"period (1/{self.rate_hz} s)")
@@ -104,6 +122,9 @@ class SequenceSpec:
         for v in (self.width, self.height):
             if v is not None and not 8 <= v <= 4096:
                 raise SimulationError(f"image size must be in [8, 4096] px, got {v}")
+        ts = self.texture_size
+        if not (isinstance(ts, (int, np.integer)) and 8 <= ts <= MAX_TEXTURE_SIZE and ts & (ts - 1) == 0):
+            raise SimulationError(f"texture size must be a power of two in [8, {MAX_TEXTURE_SIZE}] texels, got {ts}")
 
 
     @property
@@ -506,5 +527,6 @@ def make_simulation(spec: SequenceSpec, scene: Scene | None = None) -> Simulatio
     return Simulation(spec, scene)
 
 
-__all__ = ["DEPTH_MODELS", "FrameReport", "GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig",
-           "Simulation", "iter_sequence", "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig"]
+__all__ = ["DEPTH_MODELS", "MAX_DURATION_S", "MAX_RATE_HZ", "MAX_SEED", "MAX_TEXTURE_SIZE", "MIN_EVENT_PACKET_S",
+           "FrameReport", "GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation",
+           "iter_sequence", "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig"]

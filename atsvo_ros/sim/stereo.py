@@ -44,6 +44,10 @@ from atsvo_ros.sim import _stereo_kernels as kern
 from atsvo_ros.sim.render import MotionProbe, Renderer
 from atsvo_ros.sim.scene import Scene
 
+#: Brightest IR light (room or projector) in the model's unit (on a white surface at 1 m): 400 times the default
+#: room's 0.25 and 25 times the projector's dots (4); there the auto-exposure is down at its shortest (20 us).
+MAX_IR_LIGHT = 100.0
+
 
 @dataclass(frozen=True)
 class StereoModel:
@@ -112,11 +116,16 @@ class StereoModel:
             raise SimulationError("hfov_deg must be in [10, 150] and baseline_m > 0")
         lo, hi = self.exposure_limits_s
         if not 0 < lo <= hi <= 0.1 or (self.exposure_s is not None and not lo <= self.exposure_s <= hi):
-            raise SimulationError(f"IR exposure must lie in (0, 0.1] s within its limits {self.exposure_limits_s}")
+            raise SimulationError(f"IR exposure must lie in (0, 0.1] s within its limits {self.exposure_limits_s}, "
+                                  f"got {self.exposure_s}")
         if self.num_disparities % 16 or self.num_disparities < 16 or self.block_size % 2 == 0:
             raise SimulationError("num_disparities must be a positive multiple of 16 and block_size odd")
-        if self.max_blur_step_px <= 0 or self.max_subframes < 1 or self.n_dots < 0:
+        if not self.max_blur_step_px > 0 or self.max_subframes < 1 or self.n_dots < 0:
             raise SimulationError("max_blur_step_px must be > 0, max_subframes >= 1 and n_dots >= 0")
+        for name in ("projector_power", "ambient_ir"):  # NaN fails these tests
+            if not 0 <= getattr(self, name) <= MAX_IR_LIGHT:
+                raise SimulationError(f"{name} must be in [0, {MAX_IR_LIGHT:g}] (the room's default IR light is "
+                                      f"0.25, the projector's dots 4), got {getattr(self, name)}")
         if self.phase_s is not None and not abs(self.phase_s) <= 0.1:
             raise SimulationError(f"phase_s must be within +-0.1 s, got {self.phase_s}")
 

@@ -20,7 +20,8 @@ from atsvo_ros.config import load_config
 from atsvo_ros.errors import SimulationError
 from atsvo_ros.eval.plots import plot_comparison
 from atsvo_ros.sim.sequence import model_key
-from atsvo_ros.tools._cli import run
+from atsvo_ros.tools._cli import prepare_out_dir, run
+from atsvo_ros.tools._help import description
 from atsvo_ros.tools.replay import replay
 from atsvo_ros.tools.sim import main as sim_main
 
@@ -35,6 +36,14 @@ def cache_dir(override: str | None = None) -> Path:
         return Path(override).expanduser()
     env = os.environ.get("ATSVO_CACHE")
     return Path(env).expanduser() if env else Path.home() / ".cache" / "atsvo_ros"
+
+
+def cache_source(override: str | None = None) -> str:
+    """Where :func:`cache_dir` took the folder from, as error messages name it: ``--cache``, ``ATSVO_CACHE``
+    or ``cache directory`` (the default)."""
+    if override:
+        return "--cache"
+    return "ATSVO_CACHE" if os.environ.get("ATSVO_CACHE") else "cache directory"
 
 
 def sequence_path(cache: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = ()) -> Path:
@@ -55,12 +64,17 @@ def simulate(out: Path, scenario: str, duration_s: float, seed: int, sim_args: S
 
 
 def ensure_sequence(cache: Path, scenario: str, duration_s: float, seed: int, regenerate: bool = False,
-                    sim_args: Sequence[str] = (), quiet: bool = False) -> Path:
-    """The cached bag, generated on first use (into a temporary folder, then moved: never half-written)."""
+                    sim_args: Sequence[str] = (), quiet: bool = False, what: str = "cache directory") -> Path:
+    """The cached bag, generated on first use (into a temporary folder, then moved: never half-written).
+
+    Raises:
+        OutputError: the sequence must be generated and ``cache`` is a file or not writable (the message names
+            the folder as ``what``, e.g. ``ATSVO_CACHE``).
+    """
     final = sequence_path(cache, scenario, duration_s, seed, sim_args)
     if final.exists() and not regenerate:
         return final
-    cache.mkdir(parents=True, exist_ok=True)
+    prepare_out_dir(cache, what=what)
     tmp = Path(tempfile.mkdtemp(prefix=".generating_", dir=cache))
     try:
         print(f"generating the synthetic {scenario} sequence ({duration_s:g} s, seed {seed}) into {final} ...")
@@ -104,11 +118,11 @@ def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAUL
     """Generate (or reuse) the sequence, replay it in every mode, return one summary row per mode.
 
     ``sim_args`` are extra ``atsvo-sim`` options (e.g. ``["--width", "160"]``); they are part of
-    the cache key.
+    the cache key. ``out`` and the cache are checked before the generation starts.
     """
-
+    prepare_out_dir(out)
     bag = ensure_sequence(cache_dir(cache), scenario, duration_s, seed, regenerate, sim_args,
-                          quiet=progress is False)
+                          quiet=progress is False, what=cache_source(cache))
     rows = []
     evaluations = {}
     for mode in MODES:
@@ -160,7 +174,7 @@ def check_accuracy(rows: list[dict[str, Any]], max_ate_cm: float) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``atsvo-demo``."""
-    parser = argparse.ArgumentParser(prog="atsvo-demo", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="atsvo-demo", description=description(__doc__))
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO,
                         help=f"synthetic motion (default {DEFAULT_SCENARIO}; see atsvo-sim --help)")
     parser.add_argument("--duration", type=float, default=DEFAULT_DURATION_S,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,6 +27,7 @@ from tqdm import tqdm
 from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.io.event_files import open_events
 from atsvo_ros.tools._cli import add_config_args, run
+from atsvo_ros.tools._help import description
 from atsvo_ros.tools.events_render import render_figures
 
 STATS_KEYS = ("width", "height", "encoding", "n_events", "n_on", "n_off", "t_first_ns", "t_last_ns", "duration",
@@ -108,8 +110,21 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bin_seconds(text: str) -> float:
+    """``--bin``: a window in seconds, finite, at least 1 us (the event clock) and at most an hour."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not (math.isfinite(v) and 1e-6 <= v <= 3600.0):
+        raise argparse.ArgumentTypeError(f"must be a window in seconds from 1e-06 (the event clock) to 3600, "
+                                         f"got {text}")
+    return v
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="atsvo-events", description=__doc__.split("\n\n")[0].strip("`: "))
+    """The argument parser of ``atsvo-events`` (sub-commands ``stats`` and ``render``)."""
+    p = argparse.ArgumentParser(prog="atsvo-events", description=description(__doc__))
     sub = p.add_subparsers(dest="command", required=True)
     s = sub.add_parser("stats", help="counts, time span, rate and checksums of an event recording")
     s.add_argument("path", help="bag (ROS 1/2), .mcap, .db3, .aedat4, .raw or MVSEC .hdf5")
@@ -120,9 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("path", help="bag (ROS 1/2), .mcap, .db3, .aedat4, .raw or MVSEC .hdf5")
     r.add_argument("--out", required=True, help="output directory for the PNGs")
     r.add_argument("--topic", default=None, help="event topic in a bag (default: the only one)")
-    r.add_argument("--bin", type=float, default=None,
-                   help="window (s) over which the event rate is measured to find the slow/fast moments "
-                        "(default: the ATS tau_u)")
+    r.add_argument("--bin", type=_bin_seconds, default=None,
+                   help="window (s, 1e-06 to 3600) over which the event rate is measured to find the slow/fast "
+                        "moments (default: the ATS tau_u)")
     add_config_args(r, default=None)
     r.set_defaults(func=_render)
     return p

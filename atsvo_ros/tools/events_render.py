@@ -19,8 +19,9 @@ from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.events.selection import EventSelection, select_event_pixels_detailed
 from atsvo_ros.core.events.time_surface import AdaptiveTimeSurface, ConstantTimeSurface
-from atsvo_ros.errors import DecodeError
+from atsvo_ros.errors import DecodeError, OutputError
 from atsvo_ros.io.event_files import open_events
+from atsvo_ros.tools._cli import prepare_out_dir
 
 GREEN, RED, YELLOW, WHITE = (0, 220, 0), (0, 0, 255), (0, 200, 255), (255, 255, 255)
 
@@ -122,9 +123,13 @@ def _panels(moment: Moment, events: EventBatch, width: int, height: int, cfg: At
 
 def render_figures(path: str | Path, out_dir: str | Path, cfg: AtsvoConfig, topic: str | None = None,
                    bin_s: float | None = None, progress: bool = False) -> list[Path]:
-    """Write ``fig4_ts_vs_ats.png`` and ``fig5_selection_{slow,fast}.png``; returns the paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Write ``fig4_ts_vs_ats.png`` and ``fig5_selection_{slow,fast}.png``; returns the paths.
+
+    Raises:
+        OutputError: ``out_dir`` is a file, lies under one or cannot be written (checked before the recording is
+            read), or a figure could not be written.
+    """
+    out = prepare_out_dir(out_dir)
     bin_ns = int(round((bin_s or cfg.ats.tau_u_s) * 1e9))
     t0, counts, (width, height) = event_rate_bins(path, bin_ns, topic, progress)
     if not (width and height):
@@ -151,8 +156,14 @@ def render_figures(path: str | Path, out_dir: str | Path, cfg: AtsvoConfig, topi
                        _label(_draw_selection(ats_p * 0, sel, scale), f"(d) {len(sel.selected)} selected")]),
         ])
         p5 = out / f"fig5_selection_{m.name}.png"
-        cv2.imwrite(str(p5), fig5)
+        _write_png(p5, fig5)
         written.append(p5)
     p4 = out / "fig4_ts_vs_ats.png"
-    cv2.imwrite(str(p4), np.vstack(rows))
+    _write_png(p4, np.vstack(rows))
     return [p4, *written]
+
+
+def _write_png(path: Path, img: np.ndarray) -> None:
+    """``cv2.imwrite``, which reports a failure only by returning False, as an error."""
+    if not cv2.imwrite(str(path), img):
+        raise OutputError(f"could not write {path}")

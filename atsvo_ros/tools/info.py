@@ -16,6 +16,7 @@ from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.geometry import rotation_angle_rad
 from atsvo_ros.tools._cli import add_config_args, run
 from atsvo_ros.tools._environment import describe
+from atsvo_ros.tools._help import description
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -42,7 +43,7 @@ def _main(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``atsvo-info``."""
-    parser = argparse.ArgumentParser(prog="atsvo-info", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="atsvo-info", description=description(__doc__))
     add_config_args(parser, default="mini_cheetah")
     parser.add_argument("--json", action="store_true", help="print every parameter as JSON")
     return run(_main, parser, argv)

@@ -9,17 +9,55 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import tempfile
 from collections.abc import Sequence
+from pathlib import Path
 
-from atsvo_ros.sim.events import EventModel
+from atsvo_ros.errors import OutputError
+from atsvo_ros.sim.events import MAX_CONTRAST, MAX_NOISE_RATE_HZ, MAX_REFRACTORY_S, MAX_SCAN_PERIOD_S, EventModel
 from atsvo_ros.sim.motion import SCENARIOS
-from atsvo_ros.sim.sequence import DEPTH_MODELS, LAYOUTS, SequenceSpec
-from atsvo_ros.sim.stereo import StereoModel
+from atsvo_ros.sim.sequence import (
+    DEPTH_MODELS,
+    LAYOUTS,
+    MAX_DURATION_S,
+    MAX_RATE_HZ,
+    MAX_SEED,
+    MAX_TEXTURE_SIZE,
+    MIN_EVENT_PACKET_S,
+    SequenceSpec,
+)
+from atsvo_ros.sim.stereo import MAX_IR_LIGHT, StereoModel
 from atsvo_ros.sim.writer import EVENT_ENCODINGS, EVENT_MSGS, FORMATS, write_sequence
 from atsvo_ros.tools._cli import run
+from atsvo_ros.tools._help import description
+
+
+def check_out_parent(out: str | Path) -> None:
+    """Fail now, before the generation, when ``out`` cannot be written.
+
+    The simulator writes into a temporary folder next to ``out`` (creating missing parent folders) and renames
+    it when complete, so the nearest existing parent must be a writable folder; with ``--force`` an existing
+    ``out`` is emptied too. What ``out`` may already hold is the writer's check (it refuses foreign files).
+
+    Raises:
+        OutputError: one line naming the file in the way or the folder that cannot be written.
+    """
+    out = Path(out)
+    parent = out.parent
+    existing = next(p for p in (parent, *parent.parents) if p.exists() or p.is_symlink())
+    if not existing.is_dir():
+        raise OutputError(f"--out {out} is under {existing}, which is not a folder")
+    folders = [existing] + ([out] if out.is_dir() and any(out.iterdir()) else [])
+    for folder in folders:
+        try:
+            with tempfile.TemporaryFile(dir=folder):
+                pass
+        except OSError as exc:
+            raise OutputError(f"--out {out}: cannot write in {folder}: {exc.strerror or exc}") from None
 
 
 def _main(args: argparse.Namespace) -> int:
+    check_out_parent(args.out)
     spec = SequenceSpec(scenario=args.scenario, duration_s=args.duration, seed=args.seed, layout=args.layout,
                         config=args.config, width=args.width, height=args.height, rate_hz=args.rate,
                         exposure_s=args.exposure, gt_rate_hz=args.gt_rate, event_packet_s=args.packet_ms * 1e-3,
@@ -67,10 +105,13 @@ def _event_model(em: EventModel, args: argparse.Namespace) -> EventModel:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``atsvo-sim``."""
-    p = argparse.ArgumentParser(prog="atsvo-sim", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="atsvo-sim", description=description(__doc__))
     p.add_argument("--scenario", required=True, choices=SCENARIOS)
-    p.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="scene, motion and noise seed (default 0)")
+    p.add_argument("--duration", type=float, default=10.0,
+                   help=f"seconds, at most {MAX_DURATION_S:g} (default 10; the bag grows by ~20 MB per simulated "
+                        "second at 320x240)")
+    p.add_argument("--seed", type=int, default=0,
+                   help=f"scene, motion and noise seed, 0 to {MAX_SEED} (default 0)")
     p.add_argument("--out", required=True, help="output directory (ROS 2 bag directory, or holds sequence.bag)")
     p.add_argument("--format", default="mcap", choices=FORMATS, help="bag container (default mcap)")
     p.add_argument("--layout", default="robot", choices=LAYOUTS,
@@ -78,50 +119,62 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--config", default=None,
                    help="rig preset or YAML (default: synthetic, or mvsec for --layout mvsec)")
     p.add_argument("--width", type=int, default=None,
-                   help="colour image width (intrinsics scale with it; the D455's IR images keep their size)")
-    p.add_argument("--height", type=int, default=None, help="colour image height")
-    p.add_argument("--rate", type=float, default=30.0, help="RGB-D frame rate in Hz (default 30)")
-    p.add_argument("--exposure", type=float, default=0.008, help="colour exposure time in s (motion blur; 0.008)")
+                   help="colour image width, 8 to 4096 px (intrinsics scale with it; the D455's IR images keep "
+                        "their size)")
+    p.add_argument("--height", type=int, default=None, help="colour image height, 8 to 4096 px")
+    p.add_argument("--rate", type=float, default=30.0,
+                   help=f"RGB-D frame rate in Hz, at most {MAX_RATE_HZ:g} (default 30)")
+    p.add_argument("--exposure", type=float, default=0.008,
+                   help="colour exposure time in s, up to 0.1 and one frame period (motion blur; 0.008)")
     p.add_argument("--rgb-readout", type=float, default=0.0,
-                   help="colour rolling-shutter readout in s (default 0: global shutter as the D455; ~0.028 for a "
-                        "Kinect v1)")
+                   help="colour rolling-shutter readout in s, 0 to 0.1 (default 0: global shutter as the D455; "
+                        "~0.028 for a Kinect v1)")
     p.add_argument("--rgb-stamp-jitter", type=float, default=0.0,
-                   help="scale in s of the delay between a colour/depth image's exposure and its stamp (default 0: "
-                        "hardware stamps as the D455's; ~0.002 for a host-stamped Kinect v1)")
+                   help="scale in s of the delay between a colour/depth image's exposure and its stamp, 0 to 0.005 "
+                        "(default 0: hardware stamps as the D455's; ~0.002 for a host-stamped Kinect v1)")
     p.add_argument("--rgb-stamp-latency", type=float, default=0.0,
-                   help="constant delay in s of every colour/depth stamp after the exposure, on top of the jitter "
-                        "(default 0; ~0.010 for TUM's Kinect v1 against its motion capture)")
-    p.add_argument("--gt-rate", type=float, default=200.0, help="ground-truth pose rate in Hz (default 200)")
+                   help="constant delay in s of every colour/depth stamp after the exposure, on top of the jitter, "
+                        "0 to 0.1 (default 0; ~0.010 for TUM's Kinect v1 against its motion capture)")
+    p.add_argument("--gt-rate", type=float, default=200.0,
+                   help=f"ground-truth pose rate in Hz, at most {MAX_RATE_HZ:g} (default 200)")
     p.add_argument("--event-msg", default="packet", choices=EVENT_MSGS,
                    help="layout robot: event_camera_msgs/EventPacket (packet) or dvs_msgs/EventArray (dvs)")
     p.add_argument("--encoding", default="libcaer_cmp", choices=EVENT_ENCODINGS, help="EventPacket encoding")
-    p.add_argument("--packet-ms", type=float, default=1.0, help="event packet length in ms (default 1)")
-    p.add_argument("--event-scale", type=float, default=1.0, help="scale the event sensor size (tests)")
-    p.add_argument("--texture-size", type=int, default=512, help="texture side in texels (power of two)")
+    p.add_argument("--packet-ms", type=float, default=1.0,
+                   help=f"event packet length in ms, {MIN_EVENT_PACKET_S * 1e3:g} (one event clock tick) to 1000 "
+                        "(default 1)")
+    p.add_argument("--event-scale", type=float, default=1.0, help="scale the event sensor size, 0.05 to 4 (tests)")
+    p.add_argument("--texture-size", type=int, default=512,
+                   help=f"texture side in texels, a power of two from 8 to {MAX_TEXTURE_SIZE} (default 512)")
     em = EventModel()
     p.add_argument("--contrast", type=float, default=None,
-                   help=f"event contrast threshold C+ = C- in log units (default {em.contrast_pos:g})")
+                   help=f"event contrast threshold C+ = C- in log units, up to {MAX_CONTRAST:g} (default "
+                        f"{em.contrast_pos:g})")
     p.add_argument("--noise-rate", type=float, default=None,
-                   help=f"background events per pixel per s (default {em.noise_rate_hz:g})")
+                   help=f"background events per pixel per s, 0 to {MAX_NOISE_RATE_HZ:g} (default "
+                        f"{em.noise_rate_hz:g})")
     p.add_argument("--scan-period-us", type=float, default=None,
-                   help=f"event readout scan period in us (default {em.scan_period_s * 1e6:g}: the DVXplorer's "
-                        "~5 kHz scans, events stamped when their column is read); 0 = asynchronous (DAVIS)")
+                   help=f"event readout scan period in us, 0 to {MAX_SCAN_PERIOD_S * 1e6:g} (default "
+                        f"{em.scan_period_s * 1e6:g}: the DVXplorer's ~5 kHz scans, events stamped when their column "
+                        "is read); 0 = asynchronous (DAVIS)")
     p.add_argument("--refractory-us", type=float, default=None,
-                   help=f"pixel reset after an event in us; change during it is lost (default "
-                        f"{em.refractory_s * 1e6:g}, between one and two scans as measured)")
+                   help=f"pixel reset after an event in us, 0 to {MAX_REFRACTORY_S * 1e6:g}; change during it is "
+                        f"lost (default {em.refractory_s * 1e6:g}, between one and two scans as measured)")
     sm = StereoModel()
     p.add_argument("--depth", default=None, choices=DEPTH_MODELS,
                    help="depth sensor: d455 (active IR stereo exposed at its own time, registered to colour; the "
                         "robot layout's default) or sharp (rendered at the colour stamp: the too kind model before, "
                         "MVSEC's default)")
+    lo, hi = sm.exposure_limits_s
     p.add_argument("--ir-exposure", type=float, default=None,
-                   help="d455: fixed IR exposure in s (default: auto-exposure, up to the frame period)")
+                   help=f"d455: fixed IR exposure in s, {lo:g} to {hi:g} (default: auto-exposure, up to the frame "
+                        "period)")
     p.add_argument("--ir-ambient", type=float, default=None,
-                   help=f"d455: the room's IR light against the projector's (default {sm.ambient_ir:g}; lower = a "
-                        "dimmer room, longer auto-exposures, more blur)")
+                   help=f"d455: the room's IR light against the projector's, 0 to {MAX_IR_LIGHT:g} (default "
+                        f"{sm.ambient_ir:g}; lower = a dimmer room, longer auto-exposures, more blur)")
     p.add_argument("--depth-phase", type=float, default=None,
-                   help="d455: depth exposure centre minus colour exposure centre in s (default: drawn from the "
-                        "seed within half a frame period; the D455 cannot synchronise them)")
+                   help="d455: depth exposure centre minus colour exposure centre in s, -0.1 to 0.1 (default: drawn "
+                        "from the seed within half a frame period; the D455 cannot synchronise them)"),
     p.add_argument("--no-imu", action="store_true", help="layout robot: no IMU topic (default: the D455's "
                    "BMI055 on /camera/camera/imu at ~200 Hz)")
     p.add_argument("--force", action="store_true", help="replace an existing atsvo-sim output in --out")

@@ -57,9 +57,10 @@ def test_failed_generation_leaves_no_cache(tmp_path, monkeypatch, capsys):
         raise SimulationError("boom")
 
     monkeypatch.setattr(demo_mod, "simulate", broken)
-    assert demo_mod.main(["--cache", str(tmp_path), "--out", str(tmp_path / "o")]) == 1
+    cache = tmp_path / "cache"
+    assert demo_mod.main(["--cache", str(cache), "--out", str(tmp_path / "o")]) == 1
     assert "boom" in capsys.readouterr().err
-    assert list(tmp_path.iterdir()) == []
+    assert list(cache.iterdir()) == []  # (--out was created and proven writable before the generation)
 
 
 def test_table_formats_missing_metrics():
