@@ -40,6 +40,7 @@ from atsvo_ros.io.sources import detect_preset, open_source
 from atsvo_ros.io.trajectory import Trajectory, read_tum, write_tum
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.tools._cli import add_config_args, prepare_out_dir, run
+from atsvo_ros.tools._help import description
 from atsvo_ros.tools.replay_log import FrameLog, PoseLog
 
 TOPIC_FLAGS = ("rgb", "depth", "events", "rgb_info", "event_info", "ground_truth")
@@ -325,7 +326,7 @@ def _main(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``atsvo-replay``."""
-    parser = argparse.ArgumentParser(prog="atsvo-replay", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="atsvo-replay", description=description(__doc__))
     parser.add_argument("bag", nargs="+", help="ROS 1 .bag (several are merged, e.g. MVSEC data + gt), ROS 2 bag "
                         "directory (sqlite3/mcap), a .mcap/.db3 file, an MVSEC *_data.hdf5 file, or a TUM RGB-D "
                         "folder")
