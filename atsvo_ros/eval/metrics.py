@@ -5,8 +5,14 @@ Definitions (numpy only; ``evo`` is used in the tests as an independent cross-ch
 * Association: nearest stamp within ``max_diff_s`` (default 10 ms), searched from the trajectory
   with fewer poses into the longer one, ties to the earlier stamp -- the pairing of
   ``evo.core.sync.associate_trajectories``. With ``interpolate_gt`` the same pairs are kept but
-  ground truth is interpolated at the estimate stamps (evo's ``SyncMethod.interpolation``); the
-  replay tool uses it because a 100 Hz ground truth is up to 5 ms away from a frame otherwise.
+  ground truth is interpolated at the estimate stamps (evo's ``SyncMethod.interpolation``); both
+  CLIs (atsvo-replay, atsvo-eval) use it by default, so they print the same numbers for the same
+  trajectory, because a 100 Hz ground truth is up to 5 ms away from a frame otherwise. The
+  library default stays nearest (``evo``'s default; the benches' "nearest" columns rely on it).
+  The association used is stored as ``extra.association`` (``interpolated`` / ``nearest``).
+  Ground truth that repeats a stamp (motion capture does now and then) keeps the first pose of
+  each and says so in a note; an estimate that repeats a stamp is an error (every copy would be
+  matched and scored, halving the RPE).
 * Alignment of the estimate onto ground truth (``align``):
   ``paper`` -- the paper's protocol (Section III): SE(3) Umeyama on the beginning frames -- the
   matched poses of the first ``align_s`` seconds (2 s) but at most ``align_fraction`` (20 %) of
@@ -19,7 +25,8 @@ Definitions (numpy only; ``evo`` is used in the tests as an independent cross-ch
 * ATE: RMSE of the position differences of the aligned matched poses.
 * RPE per frame: for consecutive matched pairs, ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``; rotation
   error = angle of E (deg), translation error = norm of E's translation (cm); reported as means
-  (like the paper's tables; ``evo_rpe --delta 1 --delta_unit f``).
+  (like the paper's tables; ``evo_rpe --delta 1 --delta_unit f``) at top level and as RMSE (what
+  ``evo_rpe`` prints, the benches and :func:`format_metrics`) under ``extra``.
 * RPE per degree: the same error over consecutive, non-overlapping segments in which ground
   truth accumulates at least ``delta_deg`` (1) degree of rotation (``evo_rpe --delta 1
   --delta_unit d``, what the paper's deg/d and cm/d columns use); means over the segments.
@@ -30,11 +37,20 @@ Definitions (numpy only; ``evo`` is used in the tests as an independent cross-ch
   (relative to the first matched ground-truth stamp) at which the running ATE RMSE or the running
   per-degree means (once ``min_segments`` segments exist) cross a limit; a diverged run is also
   scored on its matched poses before that time (``partial``).
-* ``tracked_fraction``: ground-truth time span covered by matched estimate poses whose status is
+* ``tracked_fraction``: the share of the frames the odometry was asked to track that it tracked:
+  estimate poses with status ok over all estimate poses; without statuses (``est_ok`` None, a TUM
+  file), estimate poses matched to ground truth over all estimate poses. ``extra.gt_span_covered``
+  keeps the ground-truth view: the ground-truth time span covered by estimate poses whose status is
   ok (gaps longer than twice the median estimate period do not count), over the ground-truth span.
+* ``extra.notes``: one line per thing that makes the numbers less than they seem, each starting
+  with ``warning: ``: ground truth much sparser than the estimate (few poses matched), repeated
+  ground-truth stamps, metrics that overflowed. Non-finite values are never written to JSON:
+  :meth:`EvalResult.to_json` turns them into null (a note says which and why) and
+  :func:`metrics_json` refuses NaN / Infinity outright.
 """
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -44,7 +60,7 @@ import numpy as np
 
 from atsvo_ros.core.geometry import interpolate_trajectory, se3_inv
 from atsvo_ros.errors import EvaluationError
-from atsvo_ros.io.trajectory import Trajectory, read_tum
+from atsvo_ros.io.trajectory import Trajectory, format_stamp, read_tum
 
 ALIGN_METHODS = ("paper", "se3", "sim3", "none")
 
@@ -88,14 +104,51 @@ class EvalResult:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
-        """The metrics.json document: the issue's keys at top level, the rest under ``extra``."""
+        """The metrics.json document: the issue's keys at top level, the rest under ``extra``.
+
+        Non-finite numbers become None (JSON null): NaN and Infinity are not JSON, and the reason is
+        already in ``extra.notes`` (see :func:`evaluate`).
+        """
         out = dict(self.metrics)
         extra = dict(self.extra)
         if self.partial is not None:
             extra["partial"] = {k: v for k, v in self.partial.metrics.items()
                                 if k not in ("diverged", "diverged_at_s", "tracked_fraction")}
         out["extra"] = extra
-        return out
+        return _finite_or_none(out)
+
+
+def _finite_or_none(value: Any) -> Any:
+    """``value`` with every non-finite float (also nested in dicts and lists) replaced by None."""
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value
+
+
+def _non_finite_keys(doc: dict[str, Any], prefix: str = "") -> list[str]:
+    """Dotted names of the non-finite floats in ``doc`` (nested dicts followed)."""
+    keys: list[str] = []
+    for k, v in doc.items():
+        if isinstance(v, dict):
+            keys += _non_finite_keys(v, f"{prefix}{k}.")
+        elif isinstance(v, (float, np.floating)) and not math.isfinite(v):
+            keys.append(f"{prefix}{k}")
+    return keys
+
+
+def metrics_json(doc: dict[str, Any]) -> str:
+    """The text of metrics.json for ``doc`` (an :meth:`EvalResult.to_json` document): indented, one
+    trailing newline, strict JSON.
+
+    Non-finite numbers left in ``doc`` are written as null (``to_json`` documents have none); the
+    final dump uses ``allow_nan=False`` so NaN / Infinity, which ``jq`` and ``JSON.parse`` reject,
+    can never reach the file.
+    """
+    return json.dumps(_finite_or_none(doc), indent=2, allow_nan=False) + "\n"
 
 
 def errors_by_label(ev: EvalResult, labels: np.ndarray, names: Sequence[str]) -> dict[str, dict[str, float]]:
@@ -159,10 +212,15 @@ def umeyama(x: np.ndarray, y: np.ndarray, with_scale: bool = False) -> tuple[np.
     y = np.asarray(y, dtype=np.float64)
     if x.shape != y.shape or x.ndim != 2 or x.shape[1] != 3:
         raise EvaluationError(f"umeyama needs two (N, 3) arrays, got {x.shape} and {y.shape}")
-    mx, my = x.mean(0), y.mean(0)
-    xc, yc = x - mx, y - my
-    var_x = np.sum(xc * xc) / len(x)
-    cov = yc.T @ xc / len(x)
+    with np.errstate(over="ignore", invalid="ignore"):  # checked below and said in the error
+        mx, my = x.mean(0), y.mean(0)
+        xc, yc = x - mx, y - my
+        var_x = np.sum(xc * xc) / len(x)
+        cov = yc.T @ xc / len(x)
+    if not np.all(np.isfinite(cov)) or (with_scale and not np.isfinite(var_x)):
+        far = max(np.abs(x).max(), np.abs(y).max())
+        raise EvaluationError(f"the alignment overflows: positions reach {far:.3g} m; check the trajectories for an "
+                              "absurd value")
     U, d, Vt = np.linalg.svd(cov)
     if np.count_nonzero(d > np.finfo(np.float64).eps) < 2:
         raise EvaluationError(f"degenerate alignment: the {len(x)} positions used do not span a plane "
@@ -267,7 +325,8 @@ def _mean(x: np.ndarray) -> float | None:
     return float(np.mean(x)) if len(x) else None
 
 
-def _tracked_fraction(gt: Trajectory, stamps_ns: np.ndarray, ok: np.ndarray) -> float:
+def _gt_span_covered(gt: Trajectory, stamps_ns: np.ndarray, ok: np.ndarray) -> float:
+    """Share of the ground-truth span covered by ok estimate poses (gaps > 2 median periods excluded)."""
     span = gt.stamps_ns[-1] - gt.stamps_ns[0]
     s = stamps_ns[ok]
     if span <= 0 or len(s) == 0:
@@ -285,30 +344,108 @@ def _tracked_fraction(gt: Trajectory, stamps_ns: np.ndarray, ok: np.ndarray) -> 
 
 def evaluate(gt: Trajectory, est: Trajectory, opts: EvalOptions | None = None,
              est_ok: np.ndarray | None = None, *, _check_divergence: bool = True) -> EvalResult:
-    """Score ``est`` against ``gt``; ``est_ok`` marks estimate poses tracked with status ok."""
+    """Score ``est`` against ``gt``; ``est_ok`` marks estimate poses tracked with status ok.
+
+    Both are sorted by time; a repeated ground-truth stamp keeps its first pose. What makes the
+    numbers less than they seem (sparse ground truth, repeated ground-truth stamps, overflow) is
+    listed one line each in ``extra["notes"]``, for the CLIs to print as warnings.
+
+    Raises:
+        EvaluationError: the estimate repeats a stamp (each copy would be matched and scored); a
+            trajectory has fewer than 2 poses; fewer than 2 estimate poses match ground truth (the
+            message gives both time ranges, to check the time bases); the alignment is degenerate.
+    """
     opts = opts or EvalOptions()
-    gt = gt.sorted_unique()
+    notes: list[str] = []
+    if len(est) < 2:
+        raise EvaluationError(_too_few("the estimate", est) + " to score it against ground truth")
+    gt_unique = gt.sorted_unique()
+    n_repeats = len(gt) - len(gt_unique)
+    if n_repeats:
+        s = np.sort(gt.stamps_ns)
+        first = int(s[1:][np.diff(s) == 0][0])
+        notes.append(f"warning: ground truth repeats {n_repeats} stamp{'s' if n_repeats > 1 else ''} (first "
+                     f"{format_stamp(first)} s); the first pose of each is used")
+    gt = gt_unique
+    if len(gt) < 2:
+        raise EvaluationError(_too_few("the ground truth", gt)
+                              + (f" (its {n_repeats + 1} poses share that stamp)" if n_repeats else "")
+                              + " to score an estimate against it")
     order = np.argsort(est.stamps_ns, kind="stable")
     est = Trajectory(est.stamps_ns[order], est.T_w_b[order])
     ok_all = np.ones(len(est), bool) if est_ok is None else np.asarray(est_ok, bool)[order]
     if len(ok_all) != len(est):
         raise EvaluationError(f"{len(ok_all)} status flags for {len(est)} estimate poses")
-    ig, ie = associate(gt.stamps_ns, est.stamps_ns, int(round(opts.max_diff_s * 1e9)))
+    repeats = np.flatnonzero(np.diff(est.stamps_ns) == 0)
+    if len(repeats):
+        raise EvaluationError(f"the estimate repeats {len(repeats)} stamp{'s' if len(repeats) > 1 else ''} (first "
+                              f"{format_stamp(est.stamps_ns[repeats[0]])} s): one pose per stamp is needed, "
+                              "every copy would be matched and scored")
+    tol_ns = int(round(opts.max_diff_s * 1e9))
+    ig, ie = associate(gt.stamps_ns, est.stamps_ns, tol_ns)
     if len(ig) < 2:
-        raise EvaluationError(f"only {len(ig)} estimate poses match ground truth within {opts.max_diff_s * 1e3:g} ms "
-                              f"(ground truth {gt.stamps_ns[0] * 1e-9:.3f}-{gt.stamps_ns[-1] * 1e-9:.3f} s, estimate "
-                              f"{est.stamps_ns[0] * 1e-9:.3f}-{est.stamps_ns[-1] * 1e-9:.3f} s); check the time bases")
+        raise EvaluationError(_no_match_message(gt, est, len(ig), tol_ns))
+    sparse = _sparse_note(gt, est, ie, tol_ns)
+    if sparse:
+        notes.append(sparse)
     T_gt, stamps = gt.T_w_b[ig], est.stamps_ns[ie]
     if opts.interpolate_gt:  # same pairs, ground truth resampled at the estimate stamps (evo's interpolation sync)
         T_gt = interpolate_trajectory(gt.stamps_ns, gt.T_w_b, stamps)[0]
     T_raw = est.T_w_b[ie]
-    T_est, info = align(T_gt, T_raw, stamps, opts)
-    return _score(gt, est, T_gt, T_est, T_raw, stamps, ok_all, ie, info, opts, _check_divergence)
+    # An absurd (finite) position overflows squares and norms: numpy's RuntimeWarnings would go to
+    # stderr mid-output; the non-finite results are named in a note instead (see _score).
+    with np.errstate(over="ignore", invalid="ignore"):
+        T_est, info = align(T_gt, T_raw, stamps, opts)
+        return _score(gt, est, T_gt, T_est, T_raw, stamps, ok_all, ie, info, opts, _check_divergence,
+                      has_status=est_ok is not None, notes=notes)
+
+
+# A warning when fewer than this share of the estimate poses inside the ground truth's span are matched.
+SPARSE_MATCH_SHARE = 0.5
+
+
+def _median_period_s(stamps_ns: np.ndarray) -> float:
+    return float(np.median(np.diff(stamps_ns))) * 1e-9 if len(stamps_ns) > 1 else 0.0
+
+
+def _too_few(what: str, traj: Trajectory) -> str:
+    """"<what> has only 1 pose (at t s): at least 2 are needed" (or "has no poses")."""
+    if len(traj) == 0:
+        return f"{what} has no poses: at least 2 are needed"
+    return f"{what} has only 1 pose (at {format_stamp(traj.stamps_ns[0])} s): at least 2 are needed"
+
+
+def _no_match_message(gt: Trajectory, est: Trajectory, n: int, tol_ns: int) -> str:
+    """Why fewer than 2 poses matched: the time ranges miss each other, or the stamps interleave too coarsely."""
+    g0, g1, e0, e1 = gt.stamps_ns[0], gt.stamps_ns[-1], est.stamps_ns[0], est.stamps_ns[-1]
+    head = (f"only {n} estimate poses match ground truth within {tol_ns * 1e-6:g} ms (ground truth "
+            f"{g0 * 1e-9:.3f}-{g1 * 1e-9:.3f} s, estimate {e0 * 1e-9:.3f}-{e1 * 1e-9:.3f} s)")
+    if e0 > g1 + tol_ns or e1 < g0 - tol_ns:
+        return f"{head}: the time ranges do not overlap; check the time bases"
+    return (f"{head}: ground truth has one pose every {_median_period_s(gt.stamps_ns):.3f} s and the estimate one "
+            f"every {_median_period_s(est.stamps_ns):.3f} s (medians); check the time bases and the tolerance")
+
+
+def _sparse_note(gt: Trajectory, est: Trajectory, ie: np.ndarray, tol_ns: int) -> str | None:
+    """A warning when few estimate poses inside the ground truth's span found a ground-truth pose."""
+    inside = int(np.count_nonzero((est.stamps_ns >= gt.stamps_ns[0] - tol_ns)
+                                  & (est.stamps_ns <= gt.stamps_ns[-1] + tol_ns)))
+    n = len(np.unique(ie))
+    if n >= SPARSE_MATCH_SHARE * inside:
+        return None
+    gt_period = _median_period_s(gt.stamps_ns)
+    cause = (f"ground truth has one pose every {gt_period:.3f} s and the estimate one every "
+             f"{_median_period_s(est.stamps_ns):.3f} s, medians" if gt_period > 2 * tol_ns * 1e-9
+             else "ground truth has gaps")
+    return (f"warning: only {n} of the {inside} estimate poses within the ground truth's time span are within "
+            f"{tol_ns * 1e-6:g} ms of a ground-truth pose ({cause}): the metrics rest on these {n} poses and "
+            f"the RPE per frame spans {_median_period_s(est.stamps_ns[np.sort(ie)]):.3f} s")
 
 
 def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray, T_raw: np.ndarray,
            stamps: np.ndarray, ok_all: np.ndarray, ie: np.ndarray, info: dict, opts: EvalOptions,
-           check: bool) -> EvalResult:
+           check: bool, *, has_status: bool = False, notes: list[str] | None = None) -> EvalResult:
+    """The metrics of matched, aligned poses; with ``check`` also tracking, divergence and the partial score."""
     n = len(stamps)
     pos_err = np.linalg.norm(T_est[:, :3, 3] - T_gt[:, :3, 3], axis=1)
     ate = float(np.sqrt(np.mean(pos_err ** 2)))
@@ -317,6 +454,9 @@ def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray,
     si, sj = angle_segments(T_gt, opts.delta_deg)
     rot_d, trans_d = relative_errors(T_gt, T_est, si, sj)
     rot_dd, trans_dd = _mean(rot_d), _mean(trans_d)
+    # tracked: the frames the odometry was asked to track (every estimate pose) that it tracked: status ok,
+    # or, with no statuses (a TUM file), matched to ground truth.
+    n_tracked = int(np.count_nonzero(ok_all)) if has_status else int(len(np.unique(ie)))
     metrics: dict[str, Any] = {
         "ate_rmse_m": ate,
         "rpe_rot_deg_per_frame": _mean(rot_f),
@@ -325,11 +465,12 @@ def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray,
         "rpe_trans_cm_per_deg": None if trans_dd is None else trans_dd * 100.0,
         "diverged": False,
         "diverged_at_s": None,
-        "tracked_fraction": _tracked_fraction(gt, est.stamps_ns, ok_all) if check else None,
+        "tracked_fraction": n_tracked / len(est) if check else None,
         "n_matched": int(n),
     }
     extra: dict[str, Any] = {
         "alignment": info,
+        "association": "interpolated" if opts.interpolate_gt else "nearest",
         "ate_mean_m": float(np.mean(pos_err)),
         "ate_max_m": float(np.max(pos_err)),
         "rpe_rot_deg_per_frame_rmse": None if not len(rot_f) else float(np.sqrt(np.mean(rot_f ** 2))),
@@ -341,6 +482,18 @@ def _score(gt: Trajectory, est: Trajectory, T_gt: np.ndarray, T_est: np.ndarray,
         "n_ok_matched": int(np.count_nonzero(ok_all[ie])),
         "duration_s": float((stamps[-1] - stamps[0]) * 1e-9),
     }
+    if check:
+        notes = list(notes or [])
+        extra.update({"n_estimate": len(est), "n_tracked": n_tracked,
+                      "tracked_by": "reported ok" if has_status else "matched to ground truth",
+                      "gt_span_covered": _gt_span_covered(gt, est.stamps_ns, ok_all), "notes": notes})
+        bad = _non_finite_keys({**metrics, "extra": extra})
+        if bad:
+            far = np.abs(T_est[:, :3, 3]).max(axis=1)
+            k = int(np.argmax(far))
+            why = (f": an aligned estimate position of {far[k]:.3g} m (at {(stamps[k] - stamps[0]) * 1e-9:.3f} s) "
+                   "overflows their squares" if far[k] > 1e150 else "")
+            notes.append(f"warning: {', '.join(bad)} not finite{why}; written as null")
     result = EvalResult(metrics, stamps, T_gt, T_est, pos_err, rot_f, trans_f, extra=extra)
     if not check:
         return result
@@ -383,28 +536,75 @@ def _divergence_index(pos_err: np.ndarray, rot_d: np.ndarray, trans_d: np.ndarra
 
 
 def evaluate_files(gt_path: str, est_path: str, opts: EvalOptions | None = None) -> EvalResult:
-    """:func:`evaluate` on two TUM files."""
+    """:func:`evaluate` on two TUM files, read as atsvo-eval reads them.
 
-    return evaluate(read_tum(gt_path), read_tum(est_path), opts)
+    The estimate's stamps must increase line by line and the ground truth's must not decrease
+    (:func:`~atsvo_ros.io.trajectory.read_tum` names the offending line otherwise).
+    """
+    return evaluate(read_tum(gt_path, order="nondecreasing"), read_tum(est_path, order="increasing"), opts)
+
+
+ASSOCIATION_TEXT = {"interpolated": "ground truth interpolated at the stamps",
+                    "nearest": "nearest ground-truth pose"}
+
+
+def describe_alignment(info: dict[str, Any] | None) -> str:
+    """How the estimate was aligned, in words (from ``extra["alignment"]``), for the line next to the ATE."""
+    if not info:
+        return "not recorded"
+    method = info.get("method")
+    if method == "none":
+        return "none"
+    if method in ("se3", "sim3"):
+        text = f"{'SE(3)' if method == 'se3' else 'Sim(3)'} Umeyama over all {info.get('n_poses')} matched poses"
+        return text + (f", scale {info['scale']:.4f}" if method == "sim3" and info.get("scale") is not None else "")
+    if "fallback" in info:
+        return "first pose onto ground truth's, as ground truth hardly moves at the start"
+    return (f"SE(3) Umeyama on the first {info.get('window_s', 0.0):.2f} s ({info.get('n_poses')} poses), "
+            "then the first orientation")
 
 
 def format_metrics(metrics: dict[str, Any]) -> str:
-    """Human-readable multi-line summary of a metrics dict."""
-    def f(v: Any, scale: float = 1.0, fmt: str = ".4f") -> str:
-        return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v * scale, fmt)
+    """Human-readable multi-line summary of a metrics.json document (:meth:`EvalResult.to_json`).
 
+    One vocabulary for atsvo-replay and atsvo-eval: the ATE with the alignment that produced it,
+    the RPE per frame as its RMSE (``evo_rpe``'s and the benches' statistic; the mean is the JSON's
+    top-level value) with the association named, so numbers printed by different tools can be
+    compared. A bare ``EvalResult.metrics`` dict (no ``extra``) prints the mean RPE, labelled so.
+    """
+    def f(v: Any, scale: float = 1.0, fmt: str = ".4f") -> str:
+        return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v * scale, fmt)
+
+    extra = metrics.get("extra") or {}
+    if "rpe_rot_deg_per_frame_rmse" in extra:
+        stat, rot_f, trans_f = "RMSE", extra["rpe_rot_deg_per_frame_rmse"], extra["rpe_trans_cm_per_frame_rmse"]
+    else:
+        stat, rot_f, trans_f = "mean", metrics["rpe_rot_deg_per_frame"], metrics["rpe_trans_cm_per_frame"]
+    association = ASSOCIATION_TEXT.get(extra.get("association"), "association not recorded")
+    matched = f"matched poses        {metrics['n_matched']}"
+    if extra.get("n_estimate") is not None and extra.get("max_diff_s") is not None:
+        matched += (f" of {extra['n_estimate']} estimate poses (within {extra['max_diff_s'] * 1e3:g} ms "
+                    "of a ground-truth pose)")
+    per_deg = "RPE per degree, mean"
+    if extra.get("n_segments_per_deg") is not None and extra.get("delta_deg") is not None:
+        n_seg = extra["n_segments_per_deg"]
+        per_deg += f" over {n_seg} segment{'' if n_seg == 1 else 's'} of {extra['delta_deg']:g} deg"
+    tracked = f"tracked fraction     {f(metrics['tracked_fraction'], 1.0, '.3f')}"
+    if extra.get("n_tracked") is not None:
+        tracked += f" ({extra['n_tracked']} of {extra['n_estimate']} estimate poses {extra['tracked_by']})"
     div = f"yes, at {metrics['diverged_at_s']:.2f} s" if metrics["diverged"] else "no"
     lines = [
-        f"matched poses        {metrics['n_matched']}",
-        f"ATE RMSE             {f(metrics['ate_rmse_m'], 100.0, '.2f')} cm",
-        f"RPE per frame        {f(metrics['rpe_rot_deg_per_frame'])} deg/f  "
-        f"{f(metrics['rpe_trans_cm_per_frame'])} cm/f",
-        f"RPE per degree       {f(metrics['rpe_rot_deg_per_deg'])} deg/d  {f(metrics['rpe_trans_cm_per_deg'])} cm/d",
-        f"tracked fraction     {f(metrics['tracked_fraction'], 1.0, '.3f')}",
+        matched,
+        f"ATE RMSE             {f(metrics['ate_rmse_m'], 100.0, '.2f')} cm "
+        f"(aligned: {describe_alignment(extra.get('alignment')) if extra else 'not recorded'})",
+        f"RPE per frame, {stat}, {association}: {f(rot_f)} deg/f  {f(trans_f)} cm/f",
+        f"{per_deg}: {f(metrics['rpe_rot_deg_per_deg'])} deg/d  {f(metrics['rpe_trans_cm_per_deg'])} cm/d",
+        tracked,
         f"diverged             {div}",
     ]
     return "\n".join(lines)
 
 
-__all__ = ["ALIGN_METHODS", "EvalOptions", "EvalResult", "align", "angle_segments", "associate", "evaluate",
-           "errors_by_label", "evaluate_files", "format_metrics", "relative_errors", "rotation_angle_deg", "umeyama"]
+__all__ = ["ALIGN_METHODS", "ASSOCIATION_TEXT", "EvalOptions", "EvalResult", "align", "angle_segments", "associate",
+           "describe_alignment", "evaluate", "errors_by_label", "evaluate_files", "format_metrics", "metrics_json",
+           "relative_errors", "rotation_angle_deg", "umeyama"]

@@ -1,6 +1,7 @@
 """Trajectories: stamped poses in memory and the TUM text format (``t tx ty tz qx qy qz qw``)."""
 from __future__ import annotations
 
+import codecs
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -81,25 +82,47 @@ def _seconds_to_ns(text: str) -> int:
     return ns
 
 
-def read_tum(path: str | Path) -> Trajectory:
+STAMP_ORDERS = ("any", "nondecreasing", "increasing")
+
+
+def read_tum(path: str | Path, *, order: str = "any") -> Trajectory:
     """Read a TUM file; comments (#) and blank lines are skipped, stamps parsed exactly.
 
     Every problem raises :class:`TrajectoryError` naming ``file:line``: a wrong column count, a
     value that is not a number, NaN/inf, a zero-norm quaternion, text that is not UTF-8.
-    Quaternions are normalised (files often carry slightly non-unit ones).
+    Quaternions are normalised (files often carry slightly non-unit ones). A UTF-8 byte-order
+    mark (Windows editors write one) is skipped.
+
+    Args:
+        path: the file.
+        order: what the stamps must do from line to line, checked here because only here the
+            line is known. ``any`` (lines as in the file; the caller sorts), ``nondecreasing``
+            (never back in time; a repeated stamp is allowed: motion-capture ground truth
+            repeats a sample now and then, e.g. TUM fr2/desk's line 10863) or ``increasing``
+            (strictly: an estimate with a repeated stamp would be matched twice and halve its
+            RPE). A file that goes back in time is a concatenation or a clock reset, which
+            sorting would interleave silently, so it is an error, not sorted.
+
+    Raises:
+        TrajectoryError: as above, and for a stamp that breaks ``order`` (naming both lines).
     """
+    if order not in STAMP_ORDERS:
+        raise TrajectoryError(f"unknown stamp order {order!r} (choose one of {', '.join(STAMP_ORDERS)})")
     path = Path(path)
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise TrajectoryError(f"cannot read trajectory {path}: {exc.strerror or exc}") from None
+    bom = len(codecs.BOM_UTF8) if data.startswith(codecs.BOM_UTF8) else 0
     try:
-        text = data.decode("utf-8")
+        text = data[bom:].decode("utf-8")
     except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise TrajectoryError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
-                              f"{exc.start}); expected a TUM trajectory 't tx ty tz qx qy qz qw'") from None
+        at = exc.start + bom
+        line = data.count(b"\n", 0, at) + 1
+        raise TrajectoryError(f"{path}:{line}: not UTF-8 text (byte 0x{data[at]:02x} at offset "
+                              f"{at}); expected a TUM trajectory 't tx ty tz qx qy qz qw'") from None
     stamps, values = [], []
+    prev_line = 0
     for lineno, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#"):
@@ -117,8 +140,14 @@ def read_tum(path: str | Path) -> Trajectory:
             raise TrajectoryError(f"{path}:{lineno}: {', '.join(bad)} not finite in {line!r}")
         if float(np.linalg.norm(v[3:])) < 1e-9:
             raise TrajectoryError(f"{path}:{lineno}: the quaternion (qx qy qz qw) has zero norm in {line!r}")
+        if order != "any" and stamps and (stamp < stamps[-1] or (stamp == stamps[-1] and order == "increasing")):
+            what = "repeats the stamp of" if stamp == stamps[-1] else "goes back in time from"
+            raise TrajectoryError(f"{path}:{lineno}: stamp {format_stamp(stamp)} {what} line {prev_line} "
+                                  f"({format_stamp(stamps[-1])}); the stamps of a trajectory must "
+                                  f"{'increase' if order == 'increasing' else 'not decrease'} line by line")
         stamps.append(stamp)
         values.append(v)
+        prev_line = lineno
     if not stamps:
         raise TrajectoryError(f"{path} holds no poses")
     v = np.asarray(values)
@@ -146,4 +175,4 @@ def write_tum(path: str | Path, traj: Trajectory, header: str | None = None) -> 
                     f"{qq[0]:.9f} {qq[1]:.9f} {qq[2]:.9f} {qq[3]:.9f}\n")
 
 
-__all__ = ["Trajectory", "format_stamp", "read_tum", "write_tum"]
+__all__ = ["STAMP_ORDERS", "Trajectory", "format_stamp", "read_tum", "write_tum"]

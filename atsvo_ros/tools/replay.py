@@ -33,7 +33,7 @@ from atsvo_ros.config import AtsvoConfig, config_dir, load_config, parse_overrid
 from atsvo_ros.core.frame import TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.errors import BagError, ConfigError, TrackingError
-from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics
+from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics, metrics_json
 from atsvo_ros.eval.plots import plot_run
 from atsvo_ros.io.record import BagRecorder, check_record_path
 from atsvo_ros.io.sources import detect_preset, open_source
@@ -123,7 +123,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         check_record_path(record, force, inputs=paths)  # before the run, not after it
     out = prepare_out_dir(out_dir)  # an unusable --out fails now, not after the whole bag
     notes: list[str] = []
-    gt_file = read_tum(gt_path) if gt_path else None
+    gt_file = read_tum(gt_path, order="nondecreasing") if gt_path else None
     name = " + ".join(p.name for p in paths)
     source = open_source(paths, topics, config)
     log_lines: deque[str] = deque(maxlen=200)  # the last log lines go to timing.json; a long run keeps no more
@@ -239,7 +239,8 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
         eval_result = evaluate(gt, est, opts, est_ok=ok)
         result.metrics = eval_result.to_json()
         result.evaluation = eval_result
-        (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2) + "\n")
+        notes.extend(result.metrics["extra"]["notes"])
+        (out / "metrics.json").write_text(metrics_json(result.metrics))
     if plots:
         plot_run(out, est, eval_result, title=f"{name} ({used_mode})")
     if not any(TrackingStatus(st).tracked for st in set(statuses)):
