@@ -30,7 +30,7 @@ from tqdm import tqdm
 from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.imu import ImuBatch
-from atsvo_ros.eval.metrics import EvalOptions, errors_by_label, evaluate
+from atsvo_ros.eval.metrics import ASSOCIATION_TEXT, EvalOptions, describe_alignment, errors_by_label, evaluate
 from atsvo_ros.io.trajectory import Trajectory
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.sim.motion import PHASES
@@ -217,6 +217,11 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
         "scenario": scenario, "seed": seed, "duration_s": duration_s, "frames": len(results), "imu": use_imu,
         "ate_rmse_cm": m["ate_rmse_m"] * 100.0, "rpe_deg_per_frame": m["rpe_rot_deg_per_frame"],
         "rpe_cm_per_frame": m["rpe_trans_cm_per_frame"], "rpe_deg_per_deg": m["rpe_rot_deg_per_deg"],
+        # what the line printed per sequence shows: the RMSE (atsvo-replay's statistic), the alignment, the association
+        "rpe_deg_per_frame_rmse": ev.extra["rpe_rot_deg_per_frame_rmse"],
+        "rpe_cm_per_frame_rmse": ev.extra["rpe_trans_cm_per_frame_rmse"],
+        "aligned": describe_alignment(ev.extra["alignment"]),
+        "association": ASSOCIATION_TEXT[ev.extra["association"]],
         "rpe_cm_per_deg": m["rpe_trans_cm_per_deg"],
         "diverged": m["diverged"], "track_ms_median": float(np.median(times)) if len(times) else None,
         "track_ms_p90": float(np.percentile(times, 90)) if len(times) else None,
@@ -282,21 +287,34 @@ def main_tracking(args: argparse.Namespace) -> int:
                              use_events=args.events, flood_factor=args.flood, stamp_jitter_s=args.stamp_jitter,
                              stamp_latency_s=args.stamp_latency)
             rows.append(r)
-            print(f"{scenario:8s} seed {seed}: ATE {r['ate_rmse_cm']:.2f} cm (max {r['max_error_cm']:.1f})  "
-                  f"RPE {r['rpe_deg_per_frame']:.3f} deg/f {r['rpe_cm_per_frame']:.3f} cm/f  "
-                  f"track median {_fmt(r['track_ms_median'], '.2f')} ms (p90 {_fmt(r['track_ms_p90'], '.2f')})  "
-                  f"diverged {r['diverged']}  flagged-in-time {r['status_left_ok_in_time']}  {r['statuses']}  "
-                  f"{r['modes']}  fused median {_fmt(r['fused_ms_median'], '.2f')} ms  kf {r['keyframes']}  "
-                  f"latency p50/p99 {r['latency_ms_p50']:.1f}/{r['latency_ms_p99']:.1f} ms  "
-                  f"events {r['events']} (dropped {r['events_dropped']})", flush=True)
+            print(sequence_line(r), flush=True)
     med = [r["track_ms_median"] for r in rows if r["track_ms_median"] is not None]
-    print(f"summary: worst ATE {max(r['ate_rmse_cm'] for r in rows):.2f} cm, worst RPE "
-          f"{max(r['rpe_deg_per_frame'] for r in rows):.3f} deg/f, median tracking "
-          f"{np.median(med) if med else float('nan'):.2f} ms/frame, diverged {sum(r['diverged'] for r in rows)}/"
-          f"{len(rows)}, silently wrong {sum(not r['status_left_ok_in_time'] for r in rows)}/{len(rows)}")
+    print(summary_line(rows, med))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=2) + "\n")
     return 0
+
+
+def sequence_line(r: dict[str, Any]) -> str:
+    """One sequence's line: ATE RMSE with its alignment and RPE per frame as RMSE with its association
+    (atsvo-replay's and atsvo-eval's vocabulary), then timing, statuses and events."""
+    return (f"{r['scenario']:8s} seed {r['seed']}: ATE RMSE {r['ate_rmse_cm']:.2f} cm (max {r['max_error_cm']:.1f}; "
+            f"aligned: {r['aligned']})  RPE per frame, RMSE, {r['association']}: "
+            f"{_fmt(r['rpe_deg_per_frame_rmse'], '.3f')} deg/f {_fmt(r['rpe_cm_per_frame_rmse'], '.3f')} cm/f  "
+            f"track median {_fmt(r['track_ms_median'], '.2f')} ms (p90 {_fmt(r['track_ms_p90'], '.2f')})  "
+            f"diverged {r['diverged']}  flagged-in-time {r['status_left_ok_in_time']}  {r['statuses']}  "
+            f"{r['modes']}  fused median {_fmt(r['fused_ms_median'], '.2f')} ms  kf {r['keyframes']}  "
+            f"latency p50/p99 {r['latency_ms_p50']:.1f}/{r['latency_ms_p99']:.1f} ms  "
+            f"events {r['events']} (dropped {r['events_dropped']})")
+
+
+def summary_line(rows: list[dict[str, Any]], med: list[float]) -> str:
+    """The last line: worst ATE RMSE and worst RPE-per-frame RMSE over the sequences, tracking time, failures."""
+    rpe = [r["rpe_deg_per_frame_rmse"] for r in rows if r["rpe_deg_per_frame_rmse"] is not None]
+    return (f"summary: worst ATE RMSE {max(r['ate_rmse_cm'] for r in rows):.2f} cm, worst RPE per frame RMSE "
+            f"{_fmt(max(rpe) if rpe else None, '.3f')} deg/f, median tracking "
+            f"{np.median(med) if med else float('nan'):.2f} ms/frame, diverged {sum(r['diverged'] for r in rows)}/"
+            f"{len(rows)}, silently wrong {sum(not r['status_left_ok_in_time'] for r in rows)}/{len(rows)}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

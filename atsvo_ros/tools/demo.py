@@ -18,8 +18,9 @@ from typing import Any
 
 from atsvo_ros.config import load_config
 from atsvo_ros.errors import SimulationError
+from atsvo_ros.eval.metrics import ASSOCIATION_TEXT, describe_alignment
 from atsvo_ros.eval.plots import plot_comparison
-from atsvo_ros.sim.sequence import model_key
+from atsvo_ros.sim.sequence import SequenceSpec, model_key
 from atsvo_ros.tools._cli import prepare_out_dir, run
 from atsvo_ros.tools._help import description
 from atsvo_ros.tools.replay import replay
@@ -54,13 +55,46 @@ def sequence_path(cache: Path, scenario: str, duration_s: float, seed: int, sim_
     return cache / f"sim_v{CACHE_VERSION}_{model_key()}_{scenario}_{duration_s:g}s_seed{seed}{extra}"
 
 
+class SimulatorExitError(SimulationError):
+    """``atsvo-sim`` exited with an error that it has already printed on stderr (its own one line).
+
+    ``atsvo-demo`` exits with ``code`` without printing a second line about the same failure; a library
+    caller gets the exception as any :class:`SimulationError`.
+    """
+
+    def __init__(self, message: str, code: int) -> None:
+        super().__init__(message)
+        self.code = code
+
+    def __reduce__(self):  # keep ``code`` through pickling (multiprocessing)
+        return (type(self), (str(self), self.code))
+
+
+def check_sequence(scenario: str, duration_s: float, seed: int, width: int | None = None, height: int | None = None,
+                   event_scale: float | None = None) -> None:
+    """Check the sequence's options as ``atsvo-sim`` will, before anything is created or generated.
+
+    Why: a bad ``--seed`` or ``--duration`` is then one line of ``atsvo-demo`` naming the value, not the
+    simulator's error followed by the demo's report of the simulator's failure.
+
+    Raises:
+        SimulationError: an unknown scenario or a value out of the simulator's range (the message names it).
+    """
+    SequenceSpec(scenario=scenario, duration_s=duration_s, seed=seed, width=width, height=height,
+                 event_scale=1.0 if event_scale is None else event_scale)
+
+
 def simulate(out: Path, scenario: str, duration_s: float, seed: int, sim_args: Sequence[str] = (),
              quiet: bool = False) -> None:
-    """Write one synthetic sequence as an mcap bag with the simulator's CLI (``atsvo-sim``)."""
+    """Write one synthetic sequence as an mcap bag with the simulator's CLI (``atsvo-sim``).
+
+    Raises:
+        SimulatorExitError: ``atsvo-sim`` returned a non-zero exit code (it printed why on stderr).
+    """
     code = sim_main(["--scenario", scenario, "--duration", f"{duration_s:g}", "--seed", str(seed),
                      "--out", str(out), "--format", "mcap", *sim_args, *(["--quiet"] if quiet else [])])
     if code:
-        raise SimulationError(f"atsvo-sim failed (exit code {code}) for scenario {scenario}, {duration_s:g} s")
+        raise SimulatorExitError(f"atsvo-sim failed (exit code {code}) for scenario {scenario}, {duration_s:g} s", code)
 
 
 def ensure_sequence(cache: Path, scenario: str, duration_s: float, seed: int, regenerate: bool = False,
@@ -96,20 +130,44 @@ def _fmt(v: Any, scale: float = 1.0, digits: int = 3) -> str:
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
-    """The summary table (one row per mode)."""
-    head = (f"{'mode':6s} {'ATE [cm]':>9s} {'RPE [deg/f]':>11s} {'RPE [cm/f]':>10s} {'diverged':>9s} "
-            f"{'lost':>5s} {'reinit':>6s} {'RTF':>6s}")
+    """The summary table (one row per mode), in atsvo-replay's vocabulary.
+
+    ``rows[i]["metrics"]`` is a metrics.json document (:meth:`EvalResult.to_json`). The columns are the
+    ATE RMSE and the RPE per frame as RMSE (``extra``), as atsvo-replay and atsvo-eval print them;
+    the lines under the table name the alignment behind the ATE and the association behind the RPE.
+    """
+    head = (f"{'mode':6s} {'ATE RMSE [cm]':>13s} {'RPE RMSE [deg/f]':>16s} {'RPE RMSE [cm/f]':>15s} "
+            f"{'diverged':>9s} {'lost':>5s} {'reinit':>6s} {'RTF':>6s}")
     lines = [head, "-" * len(head)]
     for r in rows:
         m = r.get("metrics") or {}
+        x = m.get("extra") or {}
         div = "n/a" if not m else ("yes" if m.get("diverged") else "no")
         st = r.get("statuses")
         lost, reinit = ("n/a", "n/a") if st is None else (str(st.count("lost")), str(st.count("reinitialised")))
-        lines.append(f"{r['mode']:6s} {_fmt(m.get('ate_rmse_m'), 100, 2):>9s} "
-                     f"{_fmt(m.get('rpe_rot_deg_per_frame')):>11s} {_fmt(m.get('rpe_trans_cm_per_frame')):>10s} "
+        rot, trans = _fmt(x.get("rpe_rot_deg_per_frame_rmse")), _fmt(x.get("rpe_trans_cm_per_frame_rmse"))
+        lines.append(f"{r['mode']:6s} {_fmt(m.get('ate_rmse_m'), 100, 2):>13s} {rot:>16s} {trans:>15s} "
                      f"{div:>9s} {lost:>5s} {reinit:>6s} {r['rtf']:6.2f}")
-    lines.append("(ATE and RPE over the frames reported ok; lost and reinit count the frames that were not)")
+    lines += _vocabulary(rows)
+    lines.append("(ATE and RPE over every frame's pose, whatever its status; lost and reinit count the frames "
+                 "with that status)")
     return "\n".join(lines)
+
+
+def _vocabulary(rows: list[dict[str, Any]]) -> list[str]:
+    """What the table's ATE and RPE are: the alignment (per mode where they differ) and the association."""
+    extras = {r["mode"]: (r.get("metrics") or {}).get("extra") for r in rows}
+    extras = {mode: x for mode, x in extras.items() if x}
+    if not extras:
+        return []
+    aligned = {mode: describe_alignment(x.get("alignment")) for mode, x in extras.items()}
+    if len(set(aligned.values())) == 1:
+        ate = f"ATE RMSE (aligned: {next(iter(aligned.values()))})"
+    else:
+        ate = "ATE RMSE (aligned: " + "; ".join(f"{mode}: {text}" for mode, text in aligned.items()) + ")"
+    associations = dict.fromkeys(ASSOCIATION_TEXT.get(x.get("association"), "association not recorded")
+                                 for x in extras.values())
+    return [ate, f"RPE per frame, RMSE, {', '.join(associations)}"]
 
 
 def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT_DURATION_S, seed: int = 0,
@@ -120,6 +178,7 @@ def demo(out: Path, scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAUL
     ``sim_args`` are extra ``atsvo-sim`` options (e.g. ``["--width", "160"]``); they are part of
     the cache key. ``out`` and the cache are checked before the generation starts.
     """
+    check_sequence(scenario, duration_s, seed)
     prepare_out_dir(out)
     bag = ensure_sequence(cache_dir(cache), scenario, duration_s, seed, regenerate, sim_args,
                           quiet=progress is False, what=cache_source(cache))
@@ -143,8 +202,12 @@ def _main(args: argparse.Namespace) -> int:
     for flag in ("width", "height", "event_scale"):
         if getattr(args, flag) is not None:
             sim_args += [f"--{flag.replace('_', '-')}", f"{getattr(args, flag):g}"]
-    rows = demo(out, args.scenario, args.duration, args.seed, args.cache, args.regenerate,
-                progress=False if args.no_progress else None, sim_args=sim_args)
+    check_sequence(args.scenario, args.duration, args.seed, args.width, args.height, args.event_scale)
+    try:
+        rows = demo(out, args.scenario, args.duration, args.seed, args.cache, args.regenerate,
+                    progress=False if args.no_progress else None, sim_args=sim_args)
+    except SimulatorExitError as exc:  # atsvo-sim printed its one line already: exit as it did, no second line
+        return exc.code
     print(f"\n{args.scenario}, {args.duration:g} s, seed {args.seed} (synthetic, ground truth known)")
     print(format_table(rows))
     for note in sorted({n for r in rows for n in r["notes"] if n.startswith("RGB-D only")}):

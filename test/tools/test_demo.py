@@ -6,6 +6,7 @@ double of test_replay; the end-to-end test runs the real simulator and odometry 
 from __future__ import annotations
 
 import json
+import sys
 
 import pytest
 
@@ -43,11 +44,69 @@ def test_demo_generates_once_and_prints_table(tmp_path, fake_world, capsys, monk
     assert fake_world == [("backflip", 2.5, 0)]  # cached after the first run
     assert demo_mod.sequence_path(tmp_path / "cache", "backflip", 2.5, 0).is_dir()
     out = capsys.readouterr().out
-    assert "ATE [cm]" in out and "rgbd" in out
+    assert "ATE RMSE [cm]" in out and "RPE RMSE [deg/f]" in out and "RPE RMSE [cm/f]" in out and "rgbd" in out
+    lines = out.splitlines()
     for mode in demo_mod.MODES:
         doc = json.loads((tmp_path / "out" / mode / "metrics.json").read_text())
         assert doc["n_matched"] == 8
         assert (tmp_path / "out" / mode / "trajectory.png").is_file()
+        row = next(ln for ln in lines if ln.startswith(mode)).split()
+        x = doc["extra"]  # the RMSE printed, as atsvo-replay prints it, not the mean
+        assert row[1:4] == [f"{doc['ate_rmse_m'] * 100:.2f}", f"{x['rpe_rot_deg_per_frame_rmse']:.3f}",
+                            f"{x['rpe_trans_cm_per_frame_rmse']:.3f}"]
+    assert "RPE per frame, RMSE, ground truth interpolated at the stamps" in lines
+    assert any(ln.startswith("ATE RMSE (aligned: ") for ln in lines)
+
+
+def test_table_names_alignment_and_association_per_mode():
+    def row(mode, align, assoc):
+        return {"mode": mode, "rtf": 1.0, "statuses": ["ok"], "metrics": {
+            "ate_rmse_m": 0.0123, "rpe_rot_deg_per_frame": 0.1, "rpe_trans_cm_per_frame": 0.2, "diverged": False,
+            "extra": {"alignment": align, "association": assoc, "rpe_rot_deg_per_frame_rmse": 0.15,
+                      "rpe_trans_cm_per_frame_rmse": 0.25}}}
+
+    paper = {"method": "paper", "window_s": 2.0, "n_poses": 60}
+    text = demo_mod.format_table([row("rgbd", paper, "interpolated"), row("fused", paper, "interpolated")])
+    assert text.splitlines()[2].split()[:4] == ["rgbd", "1.23", "0.150", "0.250"]  # the RMSE, not the mean
+    assert ("ATE RMSE (aligned: SE(3) Umeyama on the first 2.00 s (60 poses), then the first orientation)\n"
+            "RPE per frame, RMSE, ground truth interpolated at the stamps") in text
+    text = demo_mod.format_table([row("rgbd", paper, "nearest"), row("fused", {"method": "none"}, "nearest")])
+    assert ("ATE RMSE (aligned: rgbd: SE(3) Umeyama on the first 2.00 s (60 poses), then the first orientation; "
+            "fused: none)\nRPE per frame, RMSE, nearest ground-truth pose") in text
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--seed", "-1"], "seed must be an integer in [0, 4294967295] (2**32 - 1), got -1"),
+    (["--duration", "inf"], "duration must be in (0, 3600] s, got inf"),
+    (["--duration", "0"], "duration must be in (0, 3600] s, got 0.0"),
+    (["--scenario", "nope"], "unknown scenario 'nope'"),
+    (["--width", "3"], "image size must be in [8, 4096] px, got 3"),
+])
+def test_bad_sequence_option_is_one_line_before_anything_starts(tmp_path, monkeypatch, capsys, argv, message):
+    def must_not_run(*_a, **_k):
+        raise AssertionError("the simulator was started")
+
+    monkeypatch.setattr(demo_mod, "sim_main", must_not_run)
+    monkeypatch.setattr(demo_mod, "replay", must_not_run)
+    assert demo_mod.main([*argv, "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]) == 1
+    captured = capsys.readouterr()
+    assert captured.err.count("\n") == 1 and captured.err.startswith(f"atsvo-demo: error: {message}"), captured.err
+    assert captured.out == ""
+    assert not (tmp_path / "cache").exists() and not (tmp_path / "out").exists()
+
+
+def test_simulator_failure_is_reported_once(tmp_path, monkeypatch, capsys):
+    def failing_sim(argv):  # what atsvo-sim does on an error: one line on stderr, exit code 1
+        print("atsvo-sim: error: disk full", file=sys.stderr)
+        return 1
+
+    monkeypatch.setattr(demo_mod, "sim_main", failing_sim)
+    assert demo_mod.main(["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out"), "--no-progress"]) == 1
+    assert capsys.readouterr().err == "atsvo-sim: error: disk full\n"
+    assert list((tmp_path / "cache").iterdir()) == []  # nothing half-written left in the cache
+    with pytest.raises(demo_mod.SimulatorExitError, match=r"atsvo-sim failed \(exit code 1\)") as info:
+        demo_mod.simulate(tmp_path / "seq", "trot", 1.0, 0)  # a library caller still gets the error
+    assert info.value.code == 1
 
 
 def test_failed_generation_leaves_no_cache(tmp_path, monkeypatch, capsys):
