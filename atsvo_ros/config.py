@@ -212,6 +212,20 @@ class TrackerConfig:
                                    "rotation_hypotheses_deg, 4) deg about each camera axis, k = 1..rings: a robot "
                                    "that starts tracking mid-bound turns 7-8 deg in that frame")
     refine_guesses: int = _f(1, 1, 32, doc="initial guesses optimised on the coarsest level before the best is kept")
+    feature_check_deg: float = _f(4.0, 0.0, 180.0, doc="a frame that turned more than this since the previous one "
+                                  "is checked against ORB matches to the last trusted frame (PnP on its depth), and "
+                                  "a frame the checks reject is tracked again from that pose; 0 = off")
+    feature_points: int = _f(500, 100, 10000, doc="ORB keypoints per frame for feature_check_deg (matching costs "
+                             "grow with their square: 3.5 ms for 500, 14 ms for 1000)")
+    feature_level: int = _f(1, 0, 3, doc="pyramid level the ORB features are taken on (1 = half resolution: "
+                            "2.8 ms per frame at 640x480 against 5.7 at full)")
+    feature_disagreement_deg: float = _f(1.5, 0.1, 45.0, doc="a checked frame whose direct and feature-matched "
+                                         "rotations differ by more than this (or a quarter of the frame's rotation, "
+                                         "if larger) is tracked again from the matches, and degraded if that does "
+                                         "not settle it")
+    feature_disagreement_m: float = _f(0.08, 0.001, 10.0, doc="... or whose camera centres differ by more than "
+                                       "this (PnP's translation between two frames is off by up to 7 cm on TUM "
+                                       "fr1_rpy subsamples, 4-5 cm at the 99th percentile)")
     velocity_scales: tuple[float, ...] = _f((0.5, 1.5, 2.0, 3.0),
                                             doc="while the camera turns faster than fusion.rate_threshold_deg_s, also "
                                                 "start from the constant-motion prediction with the last motion scaled "

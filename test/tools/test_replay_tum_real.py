@@ -85,9 +85,14 @@ def test_no_frame_is_reported_ok_while_it_is_wrong(rpy_run):
     assert not wrong_but_ok(folder, res, share=0.0)
 
 
-@pytest.mark.parametrize("every", [2, 3])
+@pytest.mark.parametrize("every", [2, 3, 4, 5])
 def test_subsampled_fr1_rpy_is_tracked_and_never_wrong_but_ok(rpy_folder, tmp_path, every):
-    """3-9 deg per frame: accurate, mostly ok, and no wrong pose reported as good."""
+    """3-20 deg per frame: accurate, mostly ok, and no wrong pose reported as good.
+
+    Every 4th / 5th frame (7.5 / 6 Hz, up to 20 deg between frames) needs the feature matches
+    (``tracker.feature_check_deg``): without them 66/75 and 51/60 frames are ok (88 %, 85 %), ATE 1.9 cm, and one
+    frame of every 5th is reported ok while 2.5 deg wrong; with them 74/75 and 59/60, 1.42 and 1.38 cm, none.
+    """
     folder = subsample(rpy_folder, every, tmp_path / f"tum_rgbd_fr1_rpy_every{every}")
     res = replay(folder, tmp_path / "out", plots=False, progress=False, eval_options=EvalOptions(align="se3"))
     n = len(res.statuses)

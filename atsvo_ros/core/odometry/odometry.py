@@ -23,6 +23,7 @@ the IMU buffer of :mod:`~atsvo_ros.core.odometry.gyro`), the event camera's stat
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 
@@ -33,19 +34,20 @@ from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.events.frontend import EventFrame, EventFrontEnd
 from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
-from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.core.geometry import camera_centre, se3_inv
 from atsvo_ros.core.image.depth_warp import rotate_depth
 from atsvo_ros.core.image.frontend import PreparedFrame, RgbdFrontEnd
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
 from atsvo_ros.core.mapping.ports import InlineMapping, MappingPort
 from atsvo_ros.core.odometry.event_side import EventSide
+from atsvo_ros.core.odometry.feature_assist import FeatureAssist, rotation_between_deg
 from atsvo_ros.core.odometry.gyro import GyroBuffer
 from atsvo_ros.core.odometry.output import ResultBuilder
 from atsvo_ros.core.odometry.prediction import Predictor
 from atsvo_ros.core.odometry.timing import FrameTiming
 from atsvo_ros.core.rolling_shutter import RollingShutter
-from atsvo_ros.core.tracking.checks import DEGRADED, OK, Priors
+from atsvo_ros.core.tracking.checks import DEGRADED, OK, Priors, Verdict
 from atsvo_ros.core.tracking.motion import MotionModel
 from atsvo_ros.core.tracking.tracking import Tracking, TrackingOutcome, rotation_hypotheses
 
@@ -98,6 +100,8 @@ class Odometry:
         self.gyro = GyroBuffer(self.R_rgb_imu)
         self.predictor = Predictor(config, self.motion, self.gyro, self.camera.height)
         self.timing = FrameTiming(config.rgb_camera.time_offset_s, config.rgb_camera.frame_clock_frames)
+        #: ORB matches to the last trusted frame, for frames whose direct pose is in doubt
+        self.features = FeatureAssist(config, self.cameras)
         self._results = ResultBuilder(config, self.T_base_rgb, self.T_rgb_base)
         self._affine = (0.0, 0.0)
         # the newest keyframe was taken while the camera turned fast: its colour patches are motion-blurred
@@ -185,6 +189,13 @@ class Odometry:
                     retry = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
                     attempts.append((retry, True, TrackingStatus.DEGRADED))
             if all(a[0].verdict.level != OK for a in attempts):
+                # Direct alignment settled wrong from the predictions: start it where the feature matches put the
+                # frame (a fast turn's answer lies outside its basin of convergence)
+                matched = self.features.guesses(prepared, camera_centre(guesses[0]))
+                if matched:
+                    rescue = self.tracking.track(prepared, matched, self._affine, last, rs, priors, ev_frame)
+                    attempts.append((rescue, self.tracking.uses_events(ev_frame), TrackingStatus.OK))
+            if all(a[0].verdict.level != OK for a in attempts):
                 reloc = self._relocalise(prepared, guesses[0], last, rs, priors, ev_frame)
                 attempts.append((reloc, self.tracking.uses_events(ev_frame), TrackingStatus.RELOCALISED))
             best = _best_attempt(attempts)
@@ -193,6 +204,9 @@ class Odometry:
                 self.event_side.end_frame(n_events)
                 return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame)
             out, fused, status = best
+        # without a gyro nothing else vouches for a fast frame's rotation (with one, the gyro check does)
+        if status is not TrackingStatus.DEGRADED and gyro is None and self.features.wants_check(out.T_c_w, last):
+            out, status = self._feature_check(prepared, out, status, last, rs, priors, ev_frame)
         if not self.tracking.colour_usable(prepared) and status is not TrackingStatus.DEGRADED:
             # one sensor is blind: the pose rests on depth (and events) alone, and the map is left as it is
             status = TrackingStatus.DEGRADED
@@ -218,6 +232,7 @@ class Odometry:
             kf = self._insert(self.tracking.keyframe_request(prepared, out, rs, geometry_only=True))
             self._blurred_keyframe = kf or self._blurred_keyframe
         self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
+        self.features.end_frame(prepared, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED)
         if ev_frame is not None:
             self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
         self.event_side.end_frame(n_events)
@@ -271,6 +286,40 @@ class Odometry:
             guesses += rotation_hypotheses(predicted, k * step)
         return self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
 
+    def _feature_check(self, prepared: PreparedFrame, out: TrackingOutcome, status: TrackingStatus,
+                       last: np.ndarray, rs: RollingShutter | None, priors: Priors, ev_frame: EventFrame | None
+                       ) -> tuple[TrackingOutcome, TrackingStatus]:
+        """A fast frame's direct pose against the feature matches' PnP pose (:mod:`.feature_assist`).
+
+        They agree within max(``tracker.feature_disagreement_deg``, a quarter of the frame's rotation) and
+        ``tracker.feature_disagreement_m`` of camera centre: kept. Otherwise direct tracking starts again from the
+        direct and the matched poses and keeps the better fit: a pose the matches agree with (a better optimum
+        the predictions missed), the first pose again (confirmed), or neither (degraded).
+        """
+        candidates = self.features.guesses(prepared, camera_centre(out.T_c_w))
+        if not candidates:
+            return out, status
+        cfg = self.config.tracker
+        tol_deg = max(cfg.feature_disagreement_deg, 0.25 * rotation_between_deg(out.T_c_w, last))
+
+        def agree(T_a: np.ndarray, T_b: np.ndarray) -> bool:
+            return (rotation_between_deg(T_a, T_b) <= tol_deg and
+                    float(np.linalg.norm(camera_centre(T_a) - camera_centre(T_b))) <= cfg.feature_disagreement_m)
+
+        matched = candidates[0]
+        if agree(out.T_c_w, matched):
+            return out, status
+        again = self.tracking.track(prepared, [out.T_c_w, *candidates], self._affine, last, rs, priors, ev_frame)
+        if again.verdict.level == OK:
+            if agree(again.T_c_w, matched):
+                return again, status
+            if agree(again.T_c_w, out.T_c_w):
+                return out, status
+        off_cm = float(np.linalg.norm(camera_centre(out.T_c_w) - camera_centre(matched))) * 100
+        why = (f"the direct pose and ORB matches to the last trusted frame disagree by "
+               f"{rotation_between_deg(out.T_c_w, matched):.1f} deg, {off_cm:.1f} cm")
+        return dataclasses.replace(out, verdict=Verdict(DEGRADED, why)), TrackingStatus.DEGRADED
+
     def _remember_event(self, ev_frame: EventFrame, depth_m: np.ndarray, T_c_w: np.ndarray) -> None:
         """Keep this frame's surface for the next frame's event map (built ahead when the next frame will fuse)."""
         self.event_side.remember(ev_frame, depth_m, T_c_w, self.predictor.is_fast())
@@ -317,6 +366,8 @@ class Odometry:
             status = TrackingStatus.INITIALISING if first else TrackingStatus.LOST
             self.last_loss_reason = why_not
         self.motion.push(stamp, T_c_w, trusted=first)  # the first pose defines odom; a later one is a guess
+        if ok:  # the map's own frame: later frames' matches start from it
+            self.features.end_frame(prepared, T_c_w, trusted=True)
         if ev_frame is not None:
             self._remember_event(ev_frame, prepared.depth_m, T_c_w)
         return self._result(stamp, T_c_w, None, status, t_track, ok)
@@ -338,6 +389,9 @@ class Odometry:
         else:
             reason = f"{reason}; {why_not}" if reason else why_not
         self.motion.push(stamp, predicted, trusted=False)
+        self.features.forget()
+        if ok:  # the new map's anchor
+            self.features.end_frame(prepared, predicted, trusted=True)
         # the new map and this frame's event surface share the predicted pose: a consistent base for the next
         self.event_side.forget()
         if ok and ev_frame is not None:

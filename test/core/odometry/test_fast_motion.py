@@ -9,8 +9,10 @@ DVXplorer model's events; ATE over the frames reported ok, cm, measured November
 * The same flip with the IMU fed (the robot's D455 IMU): its gyro turns each depth image to the colour's
   time (``rig.depth_time_offset_s``; the D455 exposes depth -11.1 ms off the colour on this seed): 4.39;
   without the turn 8.84.
-* A 2.5 s bound (seed 0, turns of up to ~260 deg/s at every stride): fused 7.2 with the event term joining
-  above 150 deg/s (``fusion.rate_threshold_deg_s``); 24.6 with the former 300; RGB-D alone 213.8.
+* A 2.5 s bound (seed 0, turns of up to ~260 deg/s at every stride): fused 6.9 with the event term joining
+  above 150 deg/s (``fusion.rate_threshold_deg_s``); 11.1 with the former 300; 14.1 with a constant-tau
+  surface; 151.5 with the event term weighed ~0; RGB-D alone 13.5 (213.8 before the feature matches of
+  ``tracker.feature_check_deg`` rescued its lost strides: the events' margin here is now 2x, not 30x).
 
 They fail when the event term is switched off or weighed to nothing, when the surface is swapped for
 constant tau (the ATS is the default by this and ``atsvo-bench ats-quality``, docs/events.md), and when
@@ -64,7 +66,8 @@ def test_fused_holds_the_bound_where_rgbd_alone_does_not(bound_runs):
     fused, rgbd = bound_runs
     assert fused["ate_rmse_cm"] < BOUND_BOUND_CM, fused["ate_rmse_cm"]
     assert fused["modes"].get("fused", 0) >= 30  # the event term joined at the strides' turns
-    assert rgbd["ate_rmse_cm"] > 2 * BOUND_BOUND_CM, rgbd["ate_rmse_cm"]
+    assert rgbd["ate_rmse_cm"] > BOUND_BOUND_CM, rgbd["ate_rmse_cm"]
+    assert fused["ate_rmse_cm"] < rgbd["ate_rmse_cm"] / 1.5, (fused["ate_rmse_cm"], rgbd["ate_rmse_cm"])
     assert not any(fused["statuses"].get(s, 0) for s in ("lost", "reinitialised"))
 
 

@@ -271,8 +271,11 @@ def test_gyro_prior_brings_a_fast_turn_into_the_basin(room, imu_rotated):
     R_rgb_imu = se3_exp(np.array([0, 0, 0, 0.3, -1.2, 0.5]))[:3, :3] if imu_rotated else np.eye(3)
     T_rgb_imu = np.eye(4)
     T_rgb_imu[:3, :3] = R_rgb_imu
+    # the feature matches would rescue the frame without the gyro too (test_feature_matches_rescue_a_fast_turn):
+    # off here, to see the gyro prior alone
     cfg = load_config("synthetic", overrides={"rig.T_rgb_imu": T_rgb_imu.reshape(-1).tolist(),
-                                              "rig.T_base_rgb": np.eye(4).reshape(-1).tolist()})
+                                              "rig.T_base_rgb": np.eye(4).reshape(-1).tolist(),
+                                              "tracker.feature_check_deg": 0.0})
     omega = np.radians(np.array([60.0, 250.0, 80.0]))  # rad/s, camera frame
     dt_ns = 33_000_000
     T_w_c1 = se3_exp(np.r_[0.0, 0.0, 0.0, omega * dt_ns * 1e-9])  # T(t) = exp(t xi) with the body rate
@@ -300,13 +303,31 @@ def test_relocalisation_searches_wider_without_a_trusted_velocity(room, angle_de
     out = {}
     for rings in (1, 3):
         cfg = load_config("synthetic", overrides={"rig.T_base_rgb": np.eye(4).reshape(-1).tolist(),
-                                                  "tracker.relocalisation_rings": rings})
+                                                  "tracker.relocalisation_rings": rings,
+                                                  "tracker.feature_check_deg": 0.0})  # the rings alone
         odo = Odometry(cfg, CAM)
         odo.process_frame(_frame(room, CAM, np.eye(4), 0, ss=1))
         r = odo.process_frame(_frame(room, CAM, T_w_c1, 33 * MS, ss=1))
         out[rings] = (r.status, _err(r.T_odom_camera, T_w_c1)[1])
     assert out[1][0] is not TrackingStatus.OK and out[1][1] > 3.0, out
     assert out[3][0] is TrackingStatus.RELOCALISED and out[3][1] < 0.3, out
+
+
+@pytest.mark.parametrize("angle_deg", [9.0, 12.0])
+def test_feature_matches_rescue_a_fast_turn(room, angle_deg):
+    """No gyro, no velocity yet, a 9-12 deg turn: the predictions end in a wrong optimum; ORB matches to the first
+    frame (PnP on its depth) start the alignment inside the basin, and the frame is ok and right."""
+    T_w_c1 = se3_exp(np.r_[0.01, 0.0, 0.0, np.radians(angle_deg * 0.3), np.radians(angle_deg), 0.0])
+    out = {}
+    for deg in (0.0, 4.0):
+        cfg = load_config("synthetic", overrides={"rig.T_base_rgb": np.eye(4).reshape(-1).tolist(),
+                                                  "tracker.relocalisation_rings": 1, "tracker.feature_check_deg": deg})
+        odo = Odometry(cfg, CAM)
+        odo.process_frame(_frame(room, CAM, np.eye(4), 0, ss=1))
+        r = odo.process_frame(_frame(room, CAM, T_w_c1, 33 * MS, ss=1))
+        out[deg] = (r.status, _err(r.T_odom_camera, T_w_c1)[1])
+    assert out[4.0][0] is TrackingStatus.OK and out[4.0][1] < 0.3, out
+    assert out[0.0][0] is not TrackingStatus.OK or out[0.0][1] > 3.0, out  # without them: not ok, or wrong
 
 
 def test_host_stamped_frames_are_tracked_on_the_frame_clock(room):
