@@ -22,7 +22,7 @@ the previous pose. Every peer runs frame to frame from an identity guess: none k
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -106,6 +106,36 @@ def _check_stamp(stamps: list[int], stamp: int) -> None:
         raise EvaluationError(f"frame stamps must increase: {stamp} ns after {stamps[-1]} ns")
 
 
+def _run_chains(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: CameraModel, methods: Sequence[str],
+                name: str, convert: Callable[[np.ndarray, np.ndarray], Any],
+                register: Callable[[str, Any, Any], tuple[np.ndarray, bool, float, float]], progress: bool
+                ) -> tuple[dict[str, _Chain], list[int], list[float]]:
+    """The frame-to-frame loop every peer shares: undistort, ``convert`` (timed as preparation), ``register``
+    each method's frame to the previous one (timed), chain the results."""
+    chains = {m: _Chain() for m in methods}
+    stamps: list[int] = []
+    prep: list[float] = []
+    prev = None
+    for stamp, img, depth, t_prep in tqdm(undistorted_frames(frames, camera), disable=not progress, unit="frame",
+                                          desc=name, leave=False):
+        _check_stamp(stamps, stamp)
+        t0 = time.perf_counter()
+        cur = convert(img, depth)
+        stamps.append(stamp)
+        prep.append(t_prep + time.perf_counter() - t0)
+        for m in methods:
+            if prev is None:
+                chains[m].first()
+                continue
+            t0 = time.perf_counter()
+            T_prev_cur, ok, fitness, rmse = register(m, cur, prev)
+            chains[m].step(T_prev_cur, ok, time.perf_counter() - t0, fitness, rmse)
+        prev = cur
+    if not stamps:
+        raise EvaluationError(f"no frames given to the {name} peer")
+    return chains, stamps, prep
+
+
 def run_opencv(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: CameraModel,
                methods: Sequence[str] = tuple(OPENCV_METHODS), *, depth_min_m: float = 0.0,
                depth_max_m: float = 4.0, progress: bool = False) -> dict[str, PeerRun]:
@@ -127,34 +157,19 @@ def run_opencv(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: Cam
         settings.setMinDepth(float(depth_min_m))
         settings.setMaxDepth(float(depth_max_m))
         odos[m] = cv2.Odometry(getattr(cv2, OPENCV_METHODS[m]), settings, cv2.OdometryAlgoType_COMMON)
-    chains = {m: _Chain() for m in methods}
-    stamps: list[int] = []
-    prep: list[float] = []
-    prev = None
-    for stamp, img, depth, t_prep in tqdm(undistorted_frames(frames, camera), disable=not progress, unit="frame",
-                                          desc="opencv", leave=False):
-        _check_stamp(stamps, stamp)
-        t0 = time.perf_counter()
-        grey = cv2.cvtColor(np.round(img * 255.0).astype(np.uint8), cv2.COLOR_RGB2GRAY)
-        t_prep += time.perf_counter() - t0
-        stamps.append(stamp)
-        prep.append(t_prep)
-        for m in methods:
-            if prev is None:
-                chains[m].first()
-                continue
-            t0 = time.perf_counter()
-            # OpenCV's Rt maps source points into the destination: source = this frame, destination = the previous.
-            src, dst = cv2.OdometryFrame(depth, grey), cv2.OdometryFrame(prev[0], prev[1])
-            odos[m].prepareFrames(src, dst)
-            ok, Rt = odos[m].compute(src, dst)
-            dt = time.perf_counter() - t0
-            T_prev_cur = np.asarray(Rt, np.float64)
-            ok = bool(ok) and T_prev_cur.shape == (4, 4) and bool(np.all(np.isfinite(T_prev_cur)))
-            chains[m].step(T_prev_cur, ok, dt, np.nan, np.nan)
-        prev = (depth, grey)
-    if not stamps:
-        raise EvaluationError("no frames given to the OpenCV peer")
+    def convert(img: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return depth, cv2.cvtColor(np.round(img * 255.0).astype(np.uint8), cv2.COLOR_RGB2GRAY)
+
+    def register(m: str, cur: tuple, prev: tuple) -> tuple[np.ndarray, bool, float, float]:
+        # OpenCV's Rt maps source points into the destination: source = this frame, destination = the previous.
+        src, dst = cv2.OdometryFrame(*cur), cv2.OdometryFrame(*prev)
+        odos[m].prepareFrames(src, dst)
+        ok, Rt = odos[m].compute(src, dst)
+        T_prev_cur = np.asarray(Rt, np.float64)
+        ok = bool(ok) and T_prev_cur.shape == (4, 4) and bool(np.all(np.isfinite(T_prev_cur)))
+        return T_prev_cur, ok, np.nan, np.nan
+
+    chains, stamps, prep = _run_chains(frames, camera, methods, "opencv", convert, register, progress)
     info = {"opencv": cv2.__version__, "depth_range_m": [float(depth_min_m), float(depth_max_m)],
             "algo": "COMMON", "init": "identity", "undistorted": camera.is_distorted}
     return {m: c.run(f"opencv_{m}", stamps, prep, dict(info, method=OPENCV_METHODS[m])) for m, c in chains.items()}
@@ -220,34 +235,19 @@ def run_open3d(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: Cam
     crit = [odo.OdometryConvergenceCriteria(int(n)) for n in criteria]
     params = odo.OdometryLossParams(**(loss or {}))
     eye = o3d.core.Tensor(np.eye(4), dtype=o3d.core.float64)
-    chains = {m: _Chain() for m in methods}
-    stamps: list[int] = []
-    prep: list[float] = []
-    prev = None
-    for stamp, img, depth, t_prep in tqdm(undistorted_frames(frames, camera), disable=not progress, unit="frame",
-                                          desc="open3d", leave=False):
-        _check_stamp(stamps, stamp)
-        t0 = time.perf_counter()
-        rgbd = o3d.t.geometry.RGBDImage(o3d.t.geometry.Image(o3d.core.Tensor(img)),
+    def convert(img: np.ndarray, depth: np.ndarray) -> Any:
+        return o3d.t.geometry.RGBDImage(o3d.t.geometry.Image(o3d.core.Tensor(img)),
                                         o3d.t.geometry.Image(o3d.core.Tensor(depth)))
-        t_prep += time.perf_counter() - t0
-        stamps.append(stamp)
-        prep.append(t_prep)
-        for m in methods:
-            if prev is None:
-                chains[m].first()
-                continue
-            t0 = time.perf_counter()
-            # source = this frame, target = the previous one: the result maps this camera into the previous.
-            res = odo.rgbd_odometry_multi_scale(rgbd, prev, K, eye, 1.0, float(depth_max_m), crit,
-                                                getattr(odo.Method, OPEN3D_METHODS[m]), params)
-            dt = time.perf_counter() - t0
-            T_prev_cur = res.transformation.numpy().astype(np.float64)
-            ok = bool(np.all(np.isfinite(T_prev_cur)) and res.fitness > 0)
-            chains[m].step(T_prev_cur, ok, dt, float(res.fitness), float(res.inlier_rmse))
-        prev = rgbd
-    if not stamps:
-        raise EvaluationError("no frames given to the Open3D peer")
+
+    def register(m: str, cur: Any, prev: Any) -> tuple[np.ndarray, bool, float, float]:
+        # source = this frame, target = the previous one: the result maps this camera into the previous.
+        res = odo.rgbd_odometry_multi_scale(cur, prev, K, eye, 1.0, float(depth_max_m), crit,
+                                            getattr(odo.Method, OPEN3D_METHODS[m]), params)
+        T_prev_cur = res.transformation.numpy().astype(np.float64)
+        ok = bool(np.all(np.isfinite(T_prev_cur)) and res.fitness > 0)
+        return T_prev_cur, ok, float(res.fitness), float(res.inlier_rmse)
+
+    chains, stamps, prep = _run_chains(frames, camera, methods, "open3d", convert, register, progress)
     info = {"open3d": o3d.__version__, "depth_max_m": float(depth_max_m), "criteria": list(criteria),
             "loss": {k: getattr(params, k) for k in ("depth_outlier_trunc", "depth_huber_delta",
                                                      "intensity_huber_delta")},
