@@ -53,7 +53,7 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("split", default_value="false",
                               description="true: tracking_node + mapping_node in two processes"),
         DeclareLaunchArgument("fastdds_profile", default_value=os.path.join(share, "config", "fastdds_shm.xml"),
-                              description="Fast DDS profile of our processes (16 MiB shared memory for images)"),
+                              description="Fast DDS profile of our processes (64 MiB shared memory for images)"),
         *(DeclareLaunchArgument(arg, default_value="", description=f"{key} (empty: the config file's)")
           for arg, key in TOPIC_ARGUMENTS.items()),
         OpaqueFunction(function=_nodes),
