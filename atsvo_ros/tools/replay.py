@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 from collections import Counter, deque
@@ -225,10 +224,10 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
               "status_counts": {s: statuses.count(s) for s in sorted(set(statuses))},
               "mode_counts": {m: outputs.modes.count(m) for m in sorted(set(outputs.modes))},
               "counters": dict(runtime.counters), "sync": sync_stats, "event_decoders": dec_stats,
-              "bag_read": read_stats, "notes": notes, "log": list(log_lines), "frames": outputs.frames_info()}
+              "bag_read": read_stats, "notes": notes, "log": list(log_lines)}
     if record is not None:
         timing["recording"] = {"path": str(record), "messages": record_counts}
-    (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
+    outputs.write_json(out / "timing.json", timing, "frames")
     gt = _ground_truth(gt_file, gt_samples)
     if gt_file is None and gt is not None:
         write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {name}")

@@ -8,7 +8,9 @@ in arrays allocated a chunk at a time.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable
+import json
+from collections.abc import Iterable, Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -121,14 +123,29 @@ class FrameLog:
 
     def frames_info(self) -> list[dict[str, Any]]:
         """Per-frame dicts for timing.json."""
+        return list(self.iter_frames_info())
+
+    def iter_frames_info(self) -> Iterator[dict[str, Any]]:
+        """:meth:`frames_info` one frame at a time."""
         v = self._nums.values
-        return [{"stamp_ns": int(x["stamp_ns"]), "tracking_time_s": float(x["tracking_time_s"]), "mode": mode,
+        yield from ({"stamp_ns": int(x["stamp_ns"]), "tracking_time_s": float(x["tracking_time_s"]), "mode": mode,
                  "status": status, "reason": reason, "n_points": int(x["n_points"]), "n_inliers": int(x["n_inliers"]),
                  "inliers": {k: int(c) for k, c in zip(keys, x["inliers"])},
                  "keyframe": bool(x["keyframe"]), "n_events": int(x["n_events"]),
                  "event_map_time_s": float(x["event_map_time_s"])}
                 for x, mode, status, reason, keys in zip(v, self.modes, self.statuses, self.reasons,
-                                                         self._inlier_keys)]
+                                                         self._inlier_keys))
+
+    def write_json(self, path: Path, doc: dict[str, Any], key: str) -> None:
+        """``doc`` as JSON with the per-frame dicts under ``key``, written a frame at a time (a long bag's
+        frames as one list of dicts and one string cost tens of MiB at the end of the run)."""
+        head = json.dumps(doc, indent=1)
+        with open(path, "w") as f:
+            f.write(head[:-2] if doc else "{")  # drop the closing "\n}"
+            f.write(f',\n "{key}": [' if doc else f'\n "{key}": [')
+            for i, frame in enumerate(self.iter_frames_info()):
+                f.write(("\n  " if i == 0 else ",\n  ") + json.dumps(frame))
+            f.write("\n ]\n}\n")
 
 
 __all__ = ["FrameLog", "PoseLog"]

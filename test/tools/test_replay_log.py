@@ -1,6 +1,7 @@
 """The replay's per-frame and ground-truth logs: the same record as the result objects, in bounded bytes."""
 from __future__ import annotations
 
+import json
 import tracemalloc
 
 import numpy as np
@@ -69,3 +70,14 @@ def test_memory_per_frame_and_per_ground_truth_pose_is_bounded():
     gt.extend([(3, T * 3), (1, T), (2, T * 2), (2, T * 2)])
     traj = gt.trajectory()
     assert traj.stamps_ns.tolist() == [1, 2, 3] and traj.T_w_b[2][0, 0] == 3
+
+
+def test_timing_json_is_written_a_frame_at_a_time_and_reads_back_whole(tmp_path):
+    log = FrameLog("camera")
+    for k in range(7):
+        log.append(_output(k))
+    doc = {"mode": "rgbd", "counters": {"frames": 7}, "notes": ["a", "b"]}
+    log.write_json(tmp_path / "timing.json", doc, "frames")
+    assert json.loads((tmp_path / "timing.json").read_text()) == {**doc, "frames": log.frames_info()}
+    log.write_json(tmp_path / "empty.json", {}, "frames")
+    assert json.loads((tmp_path / "empty.json").read_text()) == {"frames": log.frames_info()}
