@@ -303,8 +303,10 @@ def test_atsvo_play_feeds_a_running_node_and_records_its_odometry(sequence, tmp_
     bag, replay, *_ = sequence
     procs = NodeProcesses(["atsvo_node"], ["--ros-args", "--params-file", str(PARAMS)], tmp_path / "logs")
     try:
+        # half speed: this checks feeding and recording, not throughput (atsvo-bench nodes measures that); at real
+        # rate the node answered 66-91 of 91 frames depending on the machine's load (old and new code alike)
         done = subprocess.run([console_script("atsvo-play"), str(bag), "--config", "synthetic", "--tum",
-                               str(tmp_path / "odom.tum"), "--wait-s", str(START_TIMEOUT_S)],
+                               str(tmp_path / "odom.tum"), "--wait-s", str(START_TIMEOUT_S), "--rate", "0.5"],
                               capture_output=True, text=True, timeout=300)
     finally:
         codes = procs.stop()
