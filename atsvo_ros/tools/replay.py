@@ -113,14 +113,27 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     checked before the run). Raises :class:`TrackingError` (after writing the outputs) when not a single
     frame could be tracked, saying why.
     """
-
-
     if frame not in (None, "base", "camera"):
         raise ConfigError(f"--frame must be base or camera, got {frame!r}")
     paths = [Path(bag_path)] if isinstance(bag_path, (str, Path)) else [Path(p) for p in bag_path]
     if record is not None:
         check_record_path(record, force, inputs=paths)  # before the run, not after it
+    created = not Path(out_dir).exists()
     out = prepare_out_dir(out_dir)  # an unusable --out fails now, not after the whole bag
+    try:
+        return _replay(paths, out, config, mode, gt_path, frame, topics, plots, progress, odometry_factory,
+                       eval_options, record, force)
+    except BaseException:
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # made for this run, nothing written: leave no empty folder behind
+        raise
+
+
+def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str | None, gt_path: str | Path | None,
+            frame: str | None, topics: dict[str, str | None] | None, plots: bool, progress: bool | None,
+            odometry_factory: Callable[..., Any] | None, eval_options: Any, record: str | Path | None,
+            force: bool) -> ReplayResult:
+    """:func:`replay` once its arguments and output folder are checked."""
     notes: list[str] = []
     gt_file = read_tum(gt_path, order="nondecreasing") if gt_path else None
     name = " + ".join(p.name for p in paths)
@@ -154,7 +167,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
                                   logger=log, core_factory=odometry_factory, sinks=(recorder,) if recorder else ())
         use_events = runtime.use_events
         if mode == "fused" and not use_events:
-            notes.append("RGB-D only: the bag has no event topic")
+            notes.append("RGB-D only: the recording has no event topic")
         outputs = FrameLog("base" if frame == "base" else "camera")
         gt_samples = PoseLog() if gt_file is None and source.has("ground_truth") else None
         t_wall0 = time.perf_counter()

@@ -69,6 +69,7 @@ def test_every_frame_rejected_for_its_size_says_why(tmp_path, frames):
     msg = str(err.value)
     assert "colour image is 320x240 but the camera model is 640x480" in msg and "frames the core rejected" in msg
     assert "no colour/depth pair could be formed" not in msg
+    assert not (tmp_path / "out").exists()  # made for the run, nothing written: removed again
 
 
 @pytest.mark.parametrize("damage", ["missing", "truncated", "smaller"])
