@@ -58,10 +58,13 @@ class PoseLog:
     """Ground-truth samples ``(stamp_ns, T_w_b)`` as the sources append them; a list's ``append``/``extend``."""
 
     def __init__(self) -> None:
-        self._stamps = _Growing((), np.int64)
-        self._poses = _Growing((4, 4), np.float64)
+        self._stamps: _Growing | None = _Growing((), np.int64)
+        self._poses: _Growing | None = _Growing((4, 4), np.float64)
+        self._done: Trajectory | None = None
 
     def append(self, sample: tuple[int, np.ndarray]) -> None:
+        if self._done is not None:
+            raise ValueError("the ground truth was already handed out as a trajectory")
         self._stamps.append(int(sample[0]))
         self._poses.append(sample[1])
 
@@ -70,11 +73,15 @@ class PoseLog:
             self.append(s)
 
     def __len__(self) -> int:
-        return self._stamps.n
+        return self._stamps.n if self._done is None else len(self._done.stamps_ns)
 
     def trajectory(self) -> Trajectory:
-        """The samples as a time-sorted trajectory without repeated stamps."""
-        return Trajectory(self._stamps.values, self._poses.values).sorted_unique()
+        """The samples as a time-sorted trajectory without repeated stamps (built once; the chunks are then
+        freed, so the end of a long run holds one copy of the ground truth, not three)."""
+        if self._done is None:
+            self._done = Trajectory(self._stamps.values, self._poses.values).sorted_unique()
+            self._stamps = self._poses = None
+        return self._done
 
 
 class FrameLog:

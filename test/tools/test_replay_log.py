@@ -70,6 +70,7 @@ def test_memory_per_frame_and_per_ground_truth_pose_is_bounded():
     gt.extend([(3, T * 3), (1, T), (2, T * 2), (2, T * 2)])
     traj = gt.trajectory()
     assert traj.stamps_ns.tolist() == [1, 2, 3] and traj.T_w_b[2][0, 0] == 3
+    assert gt.trajectory() is traj and len(gt) == 3  # built once, the chunks freed
 
 
 def test_timing_json_is_written_a_frame_at_a_time_and_reads_back_whole(tmp_path):
