@@ -26,7 +26,7 @@ from rclpy.executors import MultiThreadedExecutor
 from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.errors import AtsvoError
 from atsvo_ros.io.trajectory import Trajectory, write_tum
-from atsvo_ros.nodes.player import BagPlayer, OdometryProbe
+from atsvo_ros.nodes.player import BagPlayer, OdometryProbe, spin_in_background, stop_spinning
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -40,7 +40,8 @@ def _main(args: argparse.Namespace) -> int:
     config = load_config(args.config or "mini_cheetah", overrides=parse_overrides(args.set))
     t = config.topics
     rclpy.init()
-    executor = None
+    executor = spinner = node = None
+    done = threading.Event()
     try:
         node = rclpy.create_node("atsvo_play")
         player = BagPlayer(node, bag, [t.rgb, t.depth, t.rgb_info, t.event_info, t.events, t.imu], t.rgb, t.depth,
@@ -48,14 +49,13 @@ def _main(args: argparse.Namespace) -> int:
         probe = OdometryProbe(node, config)
         executor = MultiThreadedExecutor(num_threads=2)
         executor.add_node(node)
-        threading.Thread(target=executor.spin, daemon=True).start()
+        spinner = spin_in_background(executor)
         print(f"atsvo-play: {bag.name}: {player.n_frames} frames; waiting for a subscriber on {t.rgb} "
               f"and {t.depth}", file=sys.stderr)
         if not player.wait_for_subscribers(args.wait_s, [t.rgb, t.depth]):
             raise AtsvoError(f"nothing subscribed to {t.rgb} within {args.wait_s:g} s: is atsvo_node running, "
                              "on this ROS_DOMAIN_ID, with the same topics (--config)?")
         time.sleep(0.5)  # a reader can match a moment after its writer
-        done = threading.Event()
 
         def report() -> None:
             while not done.wait(1.0):
@@ -81,8 +81,11 @@ def _main(args: argparse.Namespace) -> int:
                 print(f"atsvo-play: no odometry received: {args.tum} not written", file=sys.stderr)
         return 0 if n else 1
     finally:
+        done.set()
         if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
+            stop_spinning(executor, spinner)
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
 
 

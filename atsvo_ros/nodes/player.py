@@ -373,6 +373,25 @@ class NodeSession:
     exit_codes: list[int] = field(default_factory=list)
 
 
+def spin_in_background(executor: Any) -> threading.Thread:
+    """Spin ``executor`` on a daemon thread; stop it with :func:`stop_spinning` before the context shuts down."""
+    thread = threading.Thread(target=executor.spin, name="atsvo-spin", daemon=True)
+    thread.start()
+    return thread
+
+
+def stop_spinning(executor: Any, thread: threading.Thread | None, timeout_s: float = 5.0) -> None:
+    """Shut ``executor`` down and wait for its spin thread to return.
+
+    A process that exits while the spin thread is still inside rclpy's wait aborts ("terminate called
+    without an active exception", exit code -6: seen once in five ``atsvo-play`` runs), so the thread
+    is joined, not left to the interpreter's exit.
+    """
+    executor.shutdown(timeout_sec=timeout_s)
+    if thread is not None:
+        thread.join(timeout_s)
+
+
 @contextmanager
 def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: list[str], log_dir: str | Path, *,
                  reliable: bool = False, debug_images: bool = False, start_timeout_s: float = 60.0,
@@ -391,7 +410,7 @@ def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: lis
     procs = NodeProcesses(scripts, ros_args, log_dir)
     context = Context()
     rclpy.init(context=context)
-    executor = None
+    executor = spinner = None
     session = None
     try:
         node = rclpy.create_node(name, context=context)
@@ -400,7 +419,7 @@ def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: lis
         probe = OdometryProbe(node, config, debug_images=debug_images)
         executor = MultiThreadedExecutor(num_threads=2, context=context)
         executor.add_node(node)
-        threading.Thread(target=executor.spin, daemon=True).start()
+        spinner = spin_in_background(executor)
         # an RGB-D node subscribes to no event topic: wait for the topics it takes
         wanted = None if config.mode == "fused" else [t.rgb, t.depth, t.rgb_info, t.imu]
         if not player.wait_for_subscribers(start_timeout_s, wanted):
@@ -416,9 +435,9 @@ def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: lis
         if session is not None:
             session.exit_codes = codes
         if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
+            stop_spinning(executor, spinner)
         rclpy.try_shutdown(context=context)
 
 
 __all__ = ["BagPlayer", "NodeProcesses", "NodeSession", "OdometryProbe", "Played", "console_script", "message_class",
-           "node_session", "rss_mb"]
+           "node_session", "rss_mb", "spin_in_background", "stop_spinning"]
