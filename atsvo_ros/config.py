@@ -52,6 +52,11 @@ class CameraConfig:
                               "time. Event camera: added to the event times (and event message stamps) to put them "
                               "on the colour images' clock, e.g. -5.0 for events stamped 5 s ahead (a camera on "
                               "another clock; the run says so at its start and names the value)")
+    time_offset_search_s: float = _f(0.0, 0.0, 1.0, doc="event camera: estimate the event clock's offset to the "
+                                     "colour images at start-up, within +- this (0 = off), by correlating event "
+                                     "counts with the colour images' change (needs motion); the estimate is added to "
+                                     "time_offset_s, said once. Keep it below half the gait's period (a trot or "
+                                     "bound repeats every 0.3-0.4 s); drivers on one host differ by 10-100 ms")
     frame_clock_frames: int = _f(30, 0, 10000, doc="frames of the line fitted to the image stamps to recover the "
                                  "camera's frame clock from host-stamp jitter (0 = use the stamps as they are)")
 

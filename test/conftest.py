@@ -1,4 +1,4 @@
-"""Shared fixtures: the real recordings in ../shared/realdata (skipped when absent)."""
+"""Shared fixtures: the real recordings in ../shared/realdata (skipped when absent), a simulated 3 s trot."""
 from __future__ import annotations
 
 import os
@@ -16,3 +16,18 @@ def realdata() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"real recordings not found at {REALDATA} (set ATSVO_REALDATA)")
     return REALDATA
+
+
+#: The 3 s synthetic trot (160x120 colour + depth, 80x60 events, IMU, ground truth) several modules replay.
+TROT_3S_ARGS = ["--scenario", "trot", "--duration", "3", "--seed", "0", "--width", "160", "--height", "120",
+                "--event-scale", "0.25", "--quiet"]
+
+
+@pytest.fixture(scope="session")
+def trot_3s_bag(tmp_path_factory) -> Path:
+    """:data:`TROT_3S_ARGS` written once per session by atsvo-sim (~45 s on 2 cores)."""
+    from atsvo_ros.tools.sim import main as sim_main
+
+    bag = tmp_path_factory.mktemp("trot_3s") / "trot"
+    assert sim_main([*TROT_3S_ARGS, "--out", str(bag)]) == 0
+    return bag

@@ -117,3 +117,29 @@ def test_two_streams_apart_are_not_a_clock_jump():
     assert asm.stats.clock_jumps == 0
     asm.add_rgb(5 * S, img)  # the images' own stamps jump back: a jump
     assert asm.stats.clock_jumps == 1
+
+
+@pytest.mark.parametrize("apart_s", [0.05, -0.03])  # events (stamps and headers) 50 ms late / 30 ms early
+def test_a_small_event_clock_offset_is_estimated_at_start_up(trot_3s_bag, apart_s):
+    """event_camera.time_offset_search_s: the offset is found from motion (2-3 ms off on this trot), said once,
+    and the events follow it; the same run without the search keeps them where they were stamped."""
+    moved = {"events_ns": int(apart_s * S), "event_headers_ns": int(apart_s * S)}
+    rt, outs = _run(trot_3s_bag, {"event_camera.time_offset_search_s": 0.1}, **moved)
+    assert rt.counters["event_offset_estimated"] == 1, rt.counters
+    assert rt.event_time_offset_s == pytest.approx(-apart_s, abs=0.005)
+    assert "event clock offset estimated" in rt.first_problem["event_offset_estimated"]
+    assert sum(o.n_events > 0 for o in outs) >= len(outs) - 2 and rt.assembler.stats.clock_jumps == 0
+    rt, _ = _run(trot_3s_bag, **moved)
+    assert rt.event_time_offset_s == 0.0 and "event_offset_estimated" not in rt.counters
+
+
+def test_an_estimated_offset_back_in_time_keeps_the_event_stream_in_order():
+    clock = EventClock(0.0, ProblemLog())
+    xy = np.zeros(3, np.uint16)
+    clock.place(EventBatch(xy, xy, np.array([10, 20, 30]) * 1_000_000, np.ones(3, np.uint8)), None)
+    clock.adjust(-15_000_000)  # events were 15 ms late
+    moved, _ = clock.place(EventBatch(xy, xy, np.array([40, 50, 60]) * 1_000_000, np.ones(3, np.uint8)), None)
+    assert moved.t.tolist() == [35_000_000, 45_000_000]  # 25 ms would go before the 30 ms already placed: dropped
+    assert clock.offset_s == pytest.approx(-0.015)
+    moved, _ = clock.place(EventBatch(xy, xy, np.array([61, 62, 63]) * 1_000_000, np.ones(3, np.uint8)), None)
+    assert len(moved) == 3

@@ -388,6 +388,7 @@ class TrackingNode(Node):
             "sync_dropped_rgb": sync.dropped_rgb, "sync_dropped_depth": sync.dropped_depth,
             "missing_rgb": sync.missing_rgb, "missing_depth": sync.missing_depth,
             "frames_without_events": sync.released_without_events, "late_events": sync.late_events,
+            "event_time_offset_s": rt.event_time_offset_s,
             "bad_snapshots": self.bad_snapshots,
             "keyframes": getattr(rt.core, "n_keyframes", 0) if rt.core is not None else 0,
             "mapping": mapping, "tf": self.tf_route, "worker": "running" if self.worker.alive else "stopped",

@@ -40,6 +40,23 @@ class EventClock:
         self._offset_ns = int(round(time_offset_s * 1e9))
         self._problems = problems
         self._to_header_ns: int | None = None  # camera clock -> header clock; 0 when on the header's already
+        self._newest_ns: int | None = None  # newest event time placed
+        self._floor_ns: int | None = None  # after an adjustment back in time: events up to here were placed
+
+    @property
+    def offset_s(self) -> float:
+        """The offset added to event times (configured, plus an estimate once taken)."""
+        return self._offset_ns * 1e-9
+
+    def adjust(self, delta_ns: int) -> None:
+        """Move the events placed from now on by ``delta_ns`` more (an estimated offset).
+
+        After a move back in time, events at or before the newest already placed are dropped, so the
+        stream stays in time order (one message's worth, once).
+        """
+        self._offset_ns += int(delta_ns)
+        if delta_ns < 0:
+            self._floor_ns = self._newest_ns
 
     def place(self, batch: EventBatch, header_ns: int | None) -> tuple[EventBatch, int | None]:
         """The batch and its message's header stamp, on the colour images' clock."""
@@ -48,6 +65,13 @@ class EventClock:
         shift = (self._to_header_ns or 0) + self._offset_ns
         if shift and len(batch):
             batch = batch.shifted(shift)
+        if self._floor_ns is not None and len(batch):
+            if batch.t_first_ns <= self._floor_ns:
+                batch = batch.select(batch.t > self._floor_ns)
+            if len(batch):
+                self._floor_ns = None
+        if len(batch):
+            self._newest_ns = batch.t_last_ns
         if header_ns is not None:
             header_ns += self._offset_ns
         return batch, header_ns

@@ -44,12 +44,14 @@ from atsvo_ros.core.frame import RgbdFrame
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.core.odometry.odometry import Odometry
 from atsvo_ros.errors import AtsvoError
+from atsvo_ros.io.images import colour_from_msg
 from atsvo_ros.io.images import stamp_ns as msg_stamp_ns
 from atsvo_ros.io.imu import imu_from_msg
 from atsvo_ros.io.ros_out import body_twist
 from atsvo_ros.io.sync import FrameAssembler
 from atsvo_ros.runtime.clock_check import ClockCheck, EventClock
 from atsvo_ros.runtime.ingest import EventIngest, stamp_text
+from atsvo_ros.runtime.offset_search import EventOffsetSearch
 from atsvo_ros.runtime.problems import ProblemLog
 from atsvo_ros.runtime.release import FrameRelease
 from atsvo_ros.runtime.types import FrameInput, Logger, OdometryCore, RuntimeOutput, Sink
@@ -100,10 +102,17 @@ class OdometryRuntime:
                                      max_held_frames=self.MAX_HELD_FRAMES)
         self._clocks = ClockCheck(self._problems)
         self._event_clock = EventClock(config.event_camera.time_offset_s, self._problems)
+        self._offset_search = EventOffsetSearch(config.event_camera.time_offset_search_s if self.use_events else 0.0,
+                                                self._problems)
         self._imu_offset_ns = int(round(config.rig.imu_time_offset_s * 1e9))
         self.core: OdometryCore | None = None
         self._last_out: tuple[int, np.ndarray] | None = None
         self._last_stamp: int | None = None
+
+    @property
+    def event_time_offset_s(self) -> float:
+        """The offset added to event times: ``event_camera.time_offset_s``, plus the start-up estimate once taken."""
+        return self._event_clock.offset_s
 
     @property
     def counters(self) -> Counter[str]:
@@ -139,6 +148,10 @@ class OdometryRuntime:
         """A colour image (H, W, 3 RGB uint8, or grey) at its stamp."""
         self.assembler.add_rgb(int(stamp_ns), image)
         self._clocks.image(int(stamp_ns))
+        if self._offset_search.active:
+            delta_ns = self._offset_search.add_image(int(stamp_ns), image)
+            if delta_ns is not None:
+                self._event_clock.adjust(delta_ns)
 
     def add_depth(self, stamp_ns: int, depth_m: np.ndarray) -> None:
         """A depth image in float32 metres (0 / NaN = invalid) aligned to the colour image."""
@@ -147,11 +160,11 @@ class OdometryRuntime:
     def add_rgb_msg(self, msg: Any, topic: str = "colour") -> None:
         """sensor_msgs/Image or CompressedImage; an undecodable one is skipped and counted."""
         try:
-            self.assembler.add_rgb_msg(msg)
+            image = colour_from_msg(msg)
         except AtsvoError as exc:
             self._problems.report("images_rejected", f"{topic}: image at {stamp_text(msg)} skipped: {exc}")
             return
-        self._clocks.image(msg_stamp_ns(msg))
+        self.add_rgb(msg_stamp_ns(msg), image)
 
     def add_depth_msg(self, msg: Any, topic: str = "depth") -> None:
         """Depth image message (16UC1 scaled by ``rig.depth_scale_m``, or 32FC1 metres); bad ones are counted."""
@@ -172,6 +185,7 @@ class OdometryRuntime:
             batch, complete_to_ns = self._event_clock.place(batch, complete_to_ns)
             if len(batch):
                 self._clocks.stream("events", batch.t_last_ns)
+                self._offset_search.add_events(batch)
             self.assembler.add_events(batch, complete_to_ns=complete_to_ns)
 
     def add_event_msg(self, msg: Any, msgtype: str, topic: str = "events") -> None:

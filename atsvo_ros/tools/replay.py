@@ -236,7 +236,8 @@ def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str 
               "tracking_time_p95_s": float(np.percentile(tt, 95)), "tracking_time_max_s": float(np.max(tt)),
               "status_counts": {s: statuses.count(s) for s in sorted(set(statuses))},
               "mode_counts": {m: outputs.modes.count(m) for m in sorted(set(outputs.modes))},
-              "counters": dict(runtime.counters), "sync": sync_stats, "event_decoders": dec_stats,
+              "counters": dict(runtime.counters), "event_time_offset_s": runtime.event_time_offset_s,
+              "sync": sync_stats, "event_decoders": dec_stats,
               "bag_read": read_stats, "notes": notes, "log": list(log_lines)}
     if record is not None:
         timing["recording"] = {"path": str(record), "messages": record_counts}
@@ -301,8 +302,10 @@ def _counter_notes(runtime: Any) -> list[str]:
               "frames_waiting_camera_info": "frames before the first camera_info",
               "events_dropped": "events dropped by the event-rate cap (flood)"}
     counters = runtime.counters
-    clocks = [f"warning: {runtime.first_problem[k]}" for k in ("events_on_camera_clock", "clock_events", "clock_imu")
-              if counters.get(k)]
+    clocks = [f"warning: {runtime.first_problem[k]}" for k in ("events_on_camera_clock", "clock_events", "clock_imu",
+                                                                 "event_offset_not_estimated") if counters.get(k)]
+    if counters.get("event_offset_estimated"):
+        clocks.append(runtime.first_problem["event_offset_estimated"])
     late = runtime.assembler.stats.late_events
     if late:
         clocks.append(f"warning: {late} events arrived after their frame had gone (logged more than "
