@@ -77,13 +77,19 @@ class EventOffsetSearch:
         """A colour image; returns the offset to add to event times (ns) once it is known, else None."""
         if not self.active:
             return None
-        if self._previous is not None and self._previous.shape == image.shape and \
-                (not self._stamps or stamp_ns > self._stamps[-1]):
+        stamp = int(stamp_ns)
+        previous = self._previous
+        if previous is not None and stamp <= self._previous_stamp_ns:
+            return None  # out of order or repeated: the runtime skips it too
+        if previous is not None and previous.shape == image.shape:
             if not self._stamps:
                 self._stamps.append(self._previous_stamp_ns)
-            self._stamps.append(int(stamp_ns))
-            self._changes.append(image_change(self._previous, image))
-        self._previous, self._previous_stamp_ns = image, int(stamp_ns)
+            self._stamps.append(stamp)
+            self._changes.append(image_change(previous, image))
+        elif previous is not None:  # the image size changed: the intervals start over
+            self._stamps.clear()
+            self._changes.clear()
+        self._previous, self._previous_stamp_ns = image, stamp
         n = len(self._changes)
         if n < MIN_FRAMES or n % EVERY:
             return None
