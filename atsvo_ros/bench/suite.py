@@ -36,6 +36,7 @@ import shutil
 import sys
 import time
 from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -144,12 +145,22 @@ def _replay_child(bag: str, out: str, mode: str) -> dict[str, Any]:
             "metrics": res.metrics, "statuses": dict(Counter(res.statuses)), "evaluation": res.evaluation}
 
 
-def _pool(jobs: int, fresh: bool = False, tasks_per_child: int | None = None) -> cf.ProcessPoolExecutor:
-    """Spawned workers; ``fresh``: one task each (peak memory is the task's own); ``tasks_per_child``: recycled."""
-    kwargs: dict[str, Any] = {"max_workers": jobs, "mp_context": mp.get_context("spawn")}
-    if fresh or tasks_per_child:
-        kwargs["max_tasks_per_child"] = 1 if fresh else tasks_per_child
-    return cf.ProcessPoolExecutor(**kwargs)
+def _pool(jobs: int) -> cf.ProcessPoolExecutor:
+    """Spawned workers (no fork of a process that runs threads)."""
+    return cf.ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"))
+
+
+def _in_pools(fn: Any, tasks: list[tuple], jobs: int, per_worker: int) -> Iterator[Any]:
+    """``fn(*task)`` for every task, in parallel, as they complete; a new pool every ``jobs * per_worker`` tasks.
+
+    Fresh workers bound memory (a long-lived worker grows), but not by ``max_tasks_per_child``: on Python
+    3.11-3.14 that deadlocks once a worker retires with tasks still queued (CPython gh-115634; it hung
+    this benchmark after 9 of 126 runs).
+    """
+    step = max(1, jobs * per_worker)
+    for i in range(0, len(tasks), step):
+        with _pool(jobs) as pool:
+            yield from (f.result() for f in cf.as_completed([pool.submit(fn, *t) for t in tasks[i:i + step]]))
 
 
 # ----------------------------------------------------------------------------------------- sections
@@ -164,15 +175,12 @@ def accuracy_section(plan: Plan, jobs: int, log: Any) -> list[dict[str, Any]]:
     """Every scenario x seed x mode, in parallel (each run is deterministic)."""
     runs = [(sc, seed, plan.duration_s, mode) for sc in plan.scenarios for seed in plan.seeds for mode in plan.modes]
     rows = []
-    # workers recycled every few runs: two long-lived ones grew to 11-12 GB over ~70 10 s runs (OOM-killed on
+    # fresh workers every few runs: two long-lived ones grew to 11-12 GB over ~70 10 s runs (OOM-killed on
     # 24 GB) while one run peaks at ~2 GB
-    with _pool(jobs, tasks_per_child=4) as pool:
-        futures = {pool.submit(_accuracy_run, *r): r for r in runs}
-        for fut in cf.as_completed(futures):
-            row = fut.result()
-            rows.append(row)
-            log(f"  accuracy {row['scenario']} seed {row['seed']} {row['mode']}: ATE {row['ate_rmse_cm']:.2f} cm, "
-                f"{row['statuses']}")
+    for row in _in_pools(_accuracy_run, runs, jobs, per_worker=4):
+        rows.append(row)
+        log(f"  accuracy {row['scenario']} seed {row['seed']} {row['mode']}: ATE {row['ate_rmse_cm']:.2f} cm, "
+            f"{row['statuses']}")
     order = {(sc, s, m): i for i, (sc, s, _, m) in enumerate(runs)}
     return sorted(rows, key=lambda r: order[(r["scenario"], r["seed"], r["mode"])])
 
@@ -196,15 +204,14 @@ def timing_section(plan: Plan) -> list[dict[str, Any]]:
 def replay_section(plan: Plan, bags: dict[str, str], out: Path, log: Any) -> list[dict[str, Any]]:
     """End-to-end replays, each in a fresh process (peak memory is the process's own)."""
     rows = []
-    with _pool(1, fresh=True) as pool:
-        for name, bag in bags.items():
-            for mode in ("fused", "rgbd"):
-                r = pool.submit(_replay_child, bag, str(out / "replays" / f"{name}_{mode}"), mode).result()
-                r["sequence"] = name
-                rows.append(r)
-                m = r["metrics"] or {}
-                log(f"  replay {name} {mode}: RTF {r['rtf']:.2f}, peak {r['peak_rss_mb']:.0f} MiB, "
-                    f"ATE {m.get('ate_rmse_m', float('nan')) * 100:.2f} cm")
+    for name, bag in bags.items():
+        for mode in ("fused", "rgbd"):
+            (r,) = _in_pools(_replay_child, [(bag, str(out / "replays" / f"{name}_{mode}"), mode)], 1, 1)
+            r["sequence"] = name
+            rows.append(r)
+            m = r["metrics"] or {}
+            log(f"  replay {name} {mode}: RTF {r['rtf']:.2f}, peak {r['peak_rss_mb']:.0f} MiB, "
+                f"ATE {m.get('ate_rmse_m', float('nan')) * 100:.2f} cm")
     return rows
 
 

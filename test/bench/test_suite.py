@@ -84,3 +84,11 @@ def test_readme_without_markers_is_a_clear_error(tmp_path: Path) -> None:
     md.write_text(markdown(_results()))
     with pytest.raises(ConfigError, match="no .* block"):
         update_readme(readme, _results(), md, None)
+
+
+def test_runs_in_successive_pools_all_complete() -> None:
+    """More tasks than one pool's share: every result comes back (max_tasks_per_child hung here: CPython gh-115634)."""
+    from atsvo_ros.bench.suite import _in_pools
+
+    assert sorted(_in_pools(divmod, [(k, 3) for k in range(7)], jobs=1, per_worker=2)) == \
+        sorted(divmod(k, 3) for k in range(7))
