@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+import yaml
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
@@ -65,6 +66,27 @@ class ReplaySource(Protocol):
     def decoder_stats(self) -> dict[str, Any]: ...
 
     def read_problems(self) -> tuple[dict[str, Any] | None, list[str]]: ...
+
+
+#: Presets an atsvo-sim sequence.yaml may name (its ``config``).
+SIM_PRESETS = ("synthetic", "mvsec")
+
+
+def read_sim_description(path: Path) -> dict[str, Any] | None:
+    """atsvo-sim's ``sequence.yaml`` in the bag folder (or beside a bag file), None when there is none.
+
+    It records the preset the bag was made for (its rig and topics) and the sensor models, among them the
+    D455's drawn depth-against-colour exposure offset.
+    """
+    folder = path if path.is_dir() else path.parent
+    file = folder / "sequence.yaml"
+    if not file.is_file():
+        return None
+    try:
+        doc = yaml.safe_load(file.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise BagError(f"{file} is not readable YAML: {exc}") from None
+    return doc if isinstance(doc, dict) and doc.get("generator") == "atsvo-sim" else None
 
 
 def detect_preset(topics: dict[str, str]) -> str:
@@ -126,12 +148,14 @@ class BagSource:
     """A ROS 1 / ROS 2 bag: messages go to the sink as they come, poses to the ground truth."""
 
     default_frame = "base"
-    preset = None
 
     def __init__(self, paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> None:
         self.bag = Bag(paths, topics=topics, config_topics=vars(config.topics) if config else None)
         self.topic_types = self.bag.topic_types
         self.bad_poses: list[str] = []  # ground-truth messages skipped (NaN, zero quaternion)
+        self.sim = read_sim_description(paths[0])
+        self.preset = self.sim.get("config") if self.sim and self.sim.get("config") in SIM_PRESETS else None
+        self.preset_note = f"config preset {self.preset} (atsvo-sim's sequence.yaml)"
 
     def close(self) -> None:
         self.bag.close()
@@ -151,6 +175,12 @@ class BagSource:
     def setup(self, config: AtsvoConfig, notes: list[str]) -> tuple[AtsvoConfig, CameraModel, CameraModel]:
         first = self.bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events", "imu"])
         config = _extrinsics(config, self.bag, first, notes)
+        phase_s = ((self.sim or {}).get("models") or {}).get("depth", {}).get("phase_s_this_seed")
+        if phase_s and config.rig.depth_time_offset_s != phase_s:
+            # said, not applied: the gyro-only turn helps flips and hurts bounds (docs/simulator.md)
+            notes.append(f"sequence.yaml: the simulated D455 exposes depth {float(phase_s) * 1e3:+.1f} ms off colour; "
+                         f"--set rig.depth_time_offset_s={float(phase_s):g} turns each depth image to the colour's "
+                         "time by the gyro, as atsvo-bench does")
         return (config, *_cameras(config, first, notes, dict(self.bag.selection.items())))
 
     def feed(self, sink: SensorSink, roles: tuple[str, ...], gt: list | None) -> Iterator[None]:
@@ -246,7 +276,8 @@ class MvsecSource:
 
 
 def open_source(paths: list[Path], topics: dict[str, str | None] | None, config: AtsvoConfig | None) -> ReplaySource:
-    """The source for ``paths``: a TUM folder, an MVSEC HDF5 file, or ROS bags (several ROS 1 bags merge)."""
+    """The source for ``paths``: a TUM folder, an MVSEC HDF5 file, or ROS bags (several ROS 1 bags merge;
+    an atsvo-sim bag's ``sequence.yaml`` names its preset: :func:`read_sim_description`)."""
 
     if is_tum_folder(paths[0]):
         if len(paths) > 1:
@@ -259,4 +290,5 @@ def open_source(paths: list[Path], topics: dict[str, str | None] | None, config:
     return BagSource(paths, topics, config)
 
 
-__all__ = ["BagSource", "MvsecSource", "ReplaySource", "SensorSink", "detect_preset", "open_source"]
+__all__ = ["SIM_PRESETS", "BagSource", "MvsecSource", "ReplaySource", "SensorSink", "detect_preset", "open_source",
+           "read_sim_description"]

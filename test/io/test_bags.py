@@ -308,3 +308,23 @@ def test_real_event_bags_stream_every_event(realdata, rel, n_events):
     assert sum(len(b) for b in batches) == n_events
     t = np.concatenate([b.t for b in batches])
     assert np.all(np.diff(t) >= 0)
+
+
+def test_an_atsvo_sim_bag_names_its_preset_and_its_depth_phase(trot_3s_bag, tmp_path):
+    """sequence.yaml picks the synthetic preset (not the robot's) and the D455 phase is said, not applied."""
+    from atsvo_ros.config import load_config
+    from atsvo_ros.io.sources import open_source, read_sim_description
+
+    source = open_source([trot_3s_bag], None, None)
+    try:
+        assert source.preset == "synthetic" and "sequence.yaml" in source.preset_note
+        notes: list[str] = []
+        config, *_ = source.setup(load_config("synthetic"), notes)
+        assert config.rig.depth_time_offset_s == 0.0
+        assert any("--set rig.depth_time_offset_s=" in n for n in notes), notes
+    finally:
+        source.close()
+    assert read_sim_description(tmp_path) is None  # no sequence.yaml: chosen from the topics as before
+    (tmp_path / "sequence.yaml").write_text("generator: [unclosed")
+    with pytest.raises(BagError, match="not readable YAML"):
+        read_sim_description(tmp_path)
