@@ -225,9 +225,16 @@ class TrackerConfig:
     feature_level: int = _f(1, 0, 3, doc="pyramid level the ORB features are taken on (1 = half resolution: "
                             "2.8 ms per frame at 640x480 against 5.7 at full)")
     feature_disagreement_deg: float = _f(1.5, 0.1, 45.0, doc="a checked frame whose direct and feature-matched "
-                                         "rotations differ by more than this (or a quarter of the frame's rotation, "
-                                         "if larger) is tracked again from the matches, and degraded if that does "
-                                         "not settle it")
+                                         "rotations differ by more than this (or feature_disagreement_share of the "
+                                         "frame's rotation, if larger) is tracked again from the matches, and "
+                                         "degraded if that does not settle it")
+    feature_disagreement_share: float = _f(0.25, 0.0, 1.0, doc="... the share of the frame's rotation allowed as "
+                                           "disagreement on a large turn (PnP is 0.3-0.6 deg off, median; the "
+                                           "wrong-but-ok bound is 25 % of the true rotation)")
+    feature_unverified_deg: float = _f(8.0, 0.0, 180.0, doc="a checked frame that turned more than this with no "
+                                       "feature match to check it (too few keypoints matched) is degraded: beyond "
+                                       "direct alignment's basin nothing vouches for it (0 = off; fr1_rpy's offset "
+                                       "every-5th subsamples: 2 + 2 wrong-but-ok frames without it)")
     feature_disagreement_m: float = _f(0.08, 0.001, 10.0, doc="... or whose camera centres differ by more than "
                                        "this (PnP's translation between two frames is off by up to 7 cm on TUM "
                                        "fr1_rpy subsamples, 4-5 cm at the 99th percentile)")

@@ -43,15 +43,16 @@ def rpy_run(rpy_folder, tmp_path_factory):
     return rpy_folder, out, res
 
 
-def subsample(folder: Path, every: int, dst: Path) -> Path:
-    """A TUM folder holding every ``every``-th colour and depth frame of ``folder`` (images linked, not copied)."""
+def subsample(folder: Path, every: int, dst: Path, offset: int = 0) -> Path:
+    """A TUM folder holding every ``every``-th colour and depth frame of ``folder`` from ``offset`` (images linked)."""
     dst.mkdir(parents=True)
     for name in ("rgb", "depth", "groundtruth.txt", "README.txt"):
         (dst / name).symlink_to(folder / name)
     for name in ("rgb.txt", "depth.txt"):
         lines = (folder / name).read_text().splitlines()
+        head = [line for line in lines if line.startswith("#")]
         body = [line for line in lines if not line.startswith("#")]
-        (dst / name).write_text("\n".join([line for line in lines if line.startswith("#")] + body[::every]) + "\n")
+        (dst / name).write_text("\n".join(head + body[offset::every]) + "\n")
     return dst
 
 
@@ -100,3 +101,21 @@ def test_subsampled_fr1_rpy_is_tracked_and_never_wrong_but_ok(rpy_folder, tmp_pa
     assert res.metrics["ate_rmse_m"] <= 0.03, res.metrics
     assert res.statuses.count("ok") >= 0.9 * n, {s: res.statuses.count(s) for s in set(res.statuses)}
     assert not wrong_but_ok(folder, res)
+
+
+def test_every_5th_frame_from_other_offsets_is_mostly_ok_and_at_most_once_wrong_but_ok(rpy_folder, tmp_path):
+    """Every 5th frame from frames 1, 2 and 3 (8-23 deg per frame): the fast frames the features cannot vouch for.
+
+    Without tracker.feature_unverified_deg, 2 + 2 + 2 frames were reported ok while wrong (2.5-4 deg on 8-24 deg
+    turns; mutation: ``assert 4 <= 1``); degrading a turn over 8 deg that no feature match checks leaves at most
+    one. Measured on these sequences (tuned on them: none of fr1_rpy is held out).
+    """
+    wrong = []
+    for offset in (1, 2, 3):
+        folder = subsample(rpy_folder, 5, tmp_path / f"tum_rgbd_fr1_rpy_e5o{offset}", offset=offset)
+        res = replay(folder, tmp_path / f"out{offset}", plots=False, progress=False,
+                     eval_options=EvalOptions(align="se3"))
+        assert res.statuses.count("ok") >= 0.9 * len(res.statuses), {s: res.statuses.count(s) for s in res.statuses}
+        assert res.metrics["ate_rmse_m"] <= 0.03, (offset, res.metrics["ate_rmse_m"])
+        wrong += [(offset, *w) for w in wrong_but_ok(folder, res)]
+    assert len(wrong) <= 1, wrong

@@ -291,16 +291,22 @@ class Odometry:
                        ) -> tuple[TrackingOutcome, TrackingStatus]:
         """A fast frame's direct pose against the feature matches' PnP pose (:mod:`.feature_assist`).
 
-        They agree within max(``tracker.feature_disagreement_deg``, a quarter of the frame's rotation) and
+        No matches to check against on a turn over ``tracker.feature_unverified_deg``: degraded. They agree within
+        max(``tracker.feature_disagreement_deg``, ``feature_disagreement_share`` of the frame's rotation) and
         ``tracker.feature_disagreement_m`` of camera centre: kept. Otherwise direct tracking starts again from the
         direct and the matched poses and keeps the better fit: a pose the matches agree with (a better optimum
         the predictions missed), the first pose again (confirmed), or neither (degraded).
         """
+        cfg = self.config.tracker
+        turn_deg = rotation_between_deg(out.T_c_w, last)
         candidates = self.features.guesses(prepared, camera_centre(out.T_c_w))
         if not candidates:
+            if 0 < cfg.feature_unverified_deg < turn_deg:
+                why = (f"turned {turn_deg:.1f} deg since the last trusted frame and no feature match vouches for it "
+                       "(beyond direct alignment's basin)")
+                return dataclasses.replace(out, verdict=Verdict(DEGRADED, why)), TrackingStatus.DEGRADED
             return out, status
-        cfg = self.config.tracker
-        tol_deg = max(cfg.feature_disagreement_deg, 0.25 * rotation_between_deg(out.T_c_w, last))
+        tol_deg = max(cfg.feature_disagreement_deg, cfg.feature_disagreement_share * turn_deg)
 
         def agree(T_a: np.ndarray, T_b: np.ndarray) -> bool:
             return (rotation_between_deg(T_a, T_b) <= tol_deg and
