@@ -5,18 +5,14 @@ DVXplorer model's events; ATE over the frames reported ok, cm, measured November
 
 * A 2.4 s backflip (seed 1: stand, crouch, push-off at 1.1 s, 0.53 s of flight at up to ~590 deg/s,
   landing): fused with the ATS 11.0; RGB-D alone 91.7; fused with a constant-tau surface 20.2; fused with
-  the event term weighed ~0 (``tracker.w_event`` 1e-9) 45.7. Since ``tracker.feature_unverified_deg``
-  degrades a turn over 8 deg that no feature match vouches for: fused 7.1 (10.6 without it); RGB-D alone
-  24.1 over the frames it still reports ok, with 3 lost and 5 re-initialised (91.7 over 54 ok frames
-  without it: its wrong frames no longer pass as ok).
+  the event term weighed ~0 (``tracker.w_event`` 1e-9) 45.7.
 * The same flip with the IMU fed (the robot's D455 IMU): its gyro turns each depth image to the colour's
   time (``rig.depth_time_offset_s``; the D455 exposes depth -11.1 ms off the colour on this seed): 4.39;
   without the turn 8.84.
 * A 2.5 s bound (seed 0, turns of up to ~260 deg/s at every stride): fused 6.9 with the event term joining
   above 150 deg/s (``fusion.rate_threshold_deg_s``); 11.1 with the former 300; 14.1 with a constant-tau
   surface; 151.5 with the event term weighed ~0; RGB-D alone 13.5 (213.8 before the feature matches of
-  ``tracker.feature_check_deg`` rescued its lost strides: the events' margin here is now 2x, not 30x); with
-  ``tracker.feature_unverified_deg``, fused 5.6, RGB-D 13.5.
+  ``tracker.feature_check_deg`` rescued its lost strides: the events' margin here is now 2x, not 30x).
 
 They fail when the event term is switched off or weighed to nothing, when the surface is swapped for
 constant tau (the ATS is the default by this and ``atsvo-bench ats-quality``, docs/events.md), and when
@@ -61,10 +57,7 @@ def test_fused_holds_the_flip_where_rgbd_alone_does_not(flip_runs):
     fused, rgbd = flip_runs[:2]
     assert fused["modes"].get("fused", 0) >= 15  # the event term joined through the flight
     assert fused["ate_rmse_cm"] < FLIP_BOUND_CM, fused["ate_rmse_cm"]
-    # RGB-D alone does not hold it: over the bound on the frames it reports ok, and it loses or restarts some
-    assert rgbd["ate_rmse_cm"] > FLIP_BOUND_CM and fused["ate_rmse_cm"] < rgbd["ate_rmse_cm"] / 2, \
-        (fused["ate_rmse_cm"], rgbd["ate_rmse_cm"])
-    assert rgbd["statuses"].get("lost", 0) + rgbd["statuses"].get("reinitialised", 0) > 0, rgbd["statuses"]
+    assert rgbd["ate_rmse_cm"] > 2 * FLIP_BOUND_CM, rgbd["ate_rmse_cm"]
     # and in the flight itself, where RGB-D has the least to go on
     assert fused["phases"]["flight"]["ate_rmse_cm"] < rgbd["phases"]["flight"]["ate_rmse_cm"] / 3
 
