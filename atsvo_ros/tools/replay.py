@@ -102,10 +102,12 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
            mode: str | None = None, gt_path: str | Path | None = None, frame: str | None = None,
            topics: dict[str, str | None] | None = None, plots: bool = True, progress: bool | None = None,
            odometry_factory: Callable[..., Any] | None = None, eval_options: Any = None,
-           record: str | Path | None = None, force: bool = False) -> ReplayResult:
+           record: str | Path | None = None, force: bool = False,
+           overrides: dict[str, Any] | None = None) -> ReplayResult:
     """Replay a recording (bag, MVSEC HDF5 file, TUM folder) through the odometry runtime and write the outputs.
 
-    ``config=None`` picks the preset from the recording (topics, or a TUM folder's name); ``mode``
+    ``config=None`` picks the preset from the recording (topics, or a TUM folder's name), with
+    ``overrides`` (``--set``) on top of it; ``mode``
     defaults to ``config.mode``; ``frame`` to the source's default (``base``; ``camera`` for a TUM
     folder, whose ground truth is the camera pose); ``odometry_factory(config, rgb_camera,
     event_camera)`` defaults to the core's ``Odometry``. ``record`` names a ``.mcap`` file to write the
@@ -122,7 +124,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
     out = prepare_out_dir(out_dir)  # an unusable --out fails now, not after the whole bag
     try:
         return _replay(paths, out, config, mode, gt_path, frame, topics, plots, progress, odometry_factory,
-                       eval_options, record, force)
+                       eval_options, record, force, overrides)
     except BaseException:
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # made for this run, nothing written: leave no empty folder behind
@@ -132,7 +134,7 @@ def replay(bag_path: str | Path | Sequence[str | Path], out_dir: str | Path, con
 def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str | None, gt_path: str | Path | None,
             frame: str | None, topics: dict[str, str | None] | None, plots: bool, progress: bool | None,
             odometry_factory: Callable[..., Any] | None, eval_options: Any, record: str | Path | None,
-            force: bool) -> ReplayResult:
+            force: bool, overrides: dict[str, Any] | None) -> ReplayResult:
     """:func:`replay` once its arguments and output folder are checked."""
     notes: list[str] = []
     gt_file = read_tum(gt_path, order="nondecreasing") if gt_path else None
@@ -144,12 +146,16 @@ def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str 
         frame = frame or source.default_frame
         if config is None:
             if source.preset:
-                config = load_config(source.preset)
+                config = load_config(source.preset, overrides=overrides)
                 notes.append(source.preset_note)
             else:
                 preset = detect_preset(source.topic_types)
-                config = load_config(preset)
+                config = load_config(preset, overrides=overrides)
                 notes.append(f"config preset {preset} (from the bag's topics)")
+            if overrides:
+                notes[-1] += f", with {len(overrides)} --set override{'s' if len(overrides) > 1 else ''}"
+        elif overrides:
+            raise ConfigError("overrides go with config=None (applied to the recording's preset) or into the config")
         mode = mode or config.mode
         if mode not in ("fused", "rgbd"):
             raise ConfigError(f"--mode must be fused or rgbd, got {mode!r}")
@@ -317,13 +323,15 @@ def _counter_notes(runtime: Any) -> list[str]:
 def _main(args: argparse.Namespace) -> int:
     overrides = parse_overrides(args.set)
     config = None
-    if args.config or args.preset or overrides:
-        config = load_config(args.config or args.preset or "mini_cheetah", overrides=overrides)
+    if args.config or args.preset:
+        config = load_config(args.config or args.preset, overrides=overrides)
+        overrides = {}  # in the config already; alone, they go on the preset the recording names
+
     topics = {r: getattr(args, f"{r}_topic") for r in TOPIC_FLAGS}
     res = replay(args.bag, args.out, config, mode=args.mode, gt_path=args.gt, frame=args.frame, topics=topics,
                  plots=not args.no_plots, progress=False if args.no_progress else None,
                  eval_options=EvalOptions(align=args.align, align_s=args.align_s, interpolate_gt=not args.nearest_gt),
-                 record=args.record, force=args.force)
+                 record=args.record, force=args.force, overrides=overrides or None)
     for note in res.notes:
         if note.startswith("warning: "):
             print(f"atsvo-replay: {note}", file=sys.stderr)

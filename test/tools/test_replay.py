@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
+from atsvo_ros.errors import ConfigError
 from atsvo_ros.core.frame import OdometryResult, TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.io.trajectory import read_tum
@@ -232,3 +233,24 @@ def test_damaged_frames_are_skipped_counted_and_reported_not_fatal(tmp_path, cap
     assert "bayer_rggb8" in notes and "/camera/camera/color/image_raw" in notes  # topic and reason named
     assert len(read_tum(tmp_path / "out" / "trajectory.tum")) == 10
     assert res.metrics is not None
+
+
+def test_set_alone_goes_on_the_preset_the_recording_names(tmp_path, monkeypatch, fake):
+    """``--set`` without ``--config`` tweaks the recording's preset; it once replaced it with mini_cheetah."""
+    bag = write_bag(tmp_path / "seq", "mcap", n_frames=4)
+    (bag / "sequence.yaml").write_text("generator: atsvo-sim\nconfig: synthetic\n")
+    seen = []
+
+    def factory(config, rgb_camera, event_camera=None):
+        seen.append(config)
+        return fake(config, rgb_camera, event_camera)
+
+    real_replay = replay_mod.replay
+    monkeypatch.setattr(replay_mod, "replay", lambda *a, **k: real_replay(*a, **k, odometry_factory=factory))
+    assert main([str(bag), "--out", str(tmp_path / "out"), "--no-plots", "--no-progress",
+                 "--set", "tracker.feature_check_deg=6.5"]) == 0
+    assert seen[0] == load_config("synthetic", overrides={"tracker.feature_check_deg": 6.5})
+    notes = json.loads((tmp_path / "out" / "timing.json").read_text())
+    assert "synthetic" in json.dumps(notes) and "with 1 --set override" in json.dumps(notes)
+    with pytest.raises(ConfigError, match="overrides go with config=None"):
+        real_replay(bag, tmp_path / "o2", load_config("synthetic"), overrides={"mode": "rgbd"})
