@@ -19,6 +19,7 @@ import json
 import os
 import sys
 import time
+import zipfile
 from collections import Counter
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -57,6 +58,14 @@ def _events_cache_file(spec: SequenceSpec) -> Path:
     return _cache_file(same).with_name(f"{_cache_file(same).stem}_events.npz")
 
 
+def _save_npz(path: Path, **arrays: np.ndarray) -> None:
+    """``np.savez_compressed`` at zlib level 1: a 2.5 s bound's 28 M events in 1.9 s (63 MB), not 9.5 s (54 MB)."""
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+        for name, array in arrays.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(array), allow_pickle=False)
+
+
 def simulated_frames(spec: Any, progress: bool = True) -> tuple[list[tuple[int, np.ndarray, np.ndarray]], Any, Any]:
     """``[(stamp_ns, rgb, depth_m)]``, the IMU batch (or None) and the simulation, cached on disk."""
 
@@ -75,8 +84,8 @@ def simulated_frames(spec: Any, progress: bool = True) -> tuple[list[tuple[int, 
     path.parent.mkdir(parents=True, exist_ok=True)
     extra = {} if imu is None else {"imu_t": imu.stamps_ns, "imu_g": imu.gyro_rad_s, "imu_a": imu.accel_m_s2}
     tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # parallel runs may fill the same entry
-    np.savez_compressed(tmp, stamps=np.array([f[0] for f in frames], np.int64), rgb=np.stack([f[1] for f in frames]),
-                        depth=np.stack([f[2] for f in frames]), **extra)
+    _save_npz(tmp, stamps=np.array([f[0] for f in frames], np.int64), rgb=np.stack([f[1] for f in frames]),
+              depth=np.stack([f[2] for f in frames]), **extra)
     tmp.replace(path)
     return frames, imu, sim
 
@@ -94,7 +103,7 @@ def simulated_events(spec: Any, progress: bool = True) -> Any:
                         file=sys.stderr, leave=False, unit="packet"))
     ev = EventBatch.concatenate(batches)
     tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # parallel runs may fill the same entry
-    np.savez_compressed(tmp, x=ev.x, y=ev.y, t=ev.t, p=ev.p, w=ev.width, h=ev.height)
+    _save_npz(tmp, x=ev.x, y=ev.y, t=ev.t, p=ev.p, w=np.int64(ev.width), h=np.int64(ev.height))
     tmp.replace(path)
     return ev
 

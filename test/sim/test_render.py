@@ -140,3 +140,15 @@ def test_renderer_reuses_rays_and_matches_render_view():
     # The colour tint keeps luminance: grey ~ luma(rgb).
     luma = rgb @ np.array([0.299, 0.587, 0.114])
     np.testing.assert_allclose(luma, g1, rtol=1e-4)
+
+
+def test_an_image_cast_on_several_threads_is_bit_identical_to_one_thread():
+    scene = make_scene(3, 64)
+    cam = CameraModel(320, 240, 191.0, 191.0, 159.5, 119.5)
+    x0, x1, y0, y1 = scene.free_xy
+    T = _pose(R_LOOK_X, (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.4))
+    threaded = Renderer(scene, cam, threads=4)
+    assert threaded._pool is not None and len(threaded._bands) == 16  # the image really is split
+    one = Renderer(scene, cam, threads=1).render(T, rgb=True)
+    for a, b in zip(one, threaded.render(T, rgb=True)):
+        assert a.tobytes() == b.tobytes()

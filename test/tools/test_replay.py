@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import load_config
-from atsvo_ros.errors import ConfigError
 from atsvo_ros.core.frame import OdometryResult, TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.errors import ConfigError
 from atsvo_ros.io.trajectory import read_tum
 from atsvo_ros.tools import replay as replay_mod
 from atsvo_ros.tools.replay import main, replay
