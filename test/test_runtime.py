@@ -14,6 +14,7 @@ from atsvo_ros.eval.metrics import EvalOptions, evaluate
 from atsvo_ros.io.msgtypes import register_event_types
 from atsvo_ros.io.trajectory import Trajectory, read_tum
 from atsvo_ros.runtime.runtime import OdometryRuntime
+from test.conftest import simulate_bag
 
 SIM_ARGS = ["--scenario", "trot", "--duration", "0.6", "--seed", "3", "--width", "160", "--height", "120",
             "--event-scale", "0.25", "--quiet"]
@@ -21,11 +22,7 @@ SIM_ARGS = ["--scenario", "trot", "--duration", "0.6", "--seed", "3", "--width",
 
 @pytest.fixture(scope="module")
 def bag(tmp_path_factory) -> Path:
-    from atsvo_ros.tools.sim import main as sim_main
-
-    out = tmp_path_factory.mktemp("pipeline") / "bag"
-    assert sim_main([*SIM_ARGS, "--out", str(out)]) == 0
-    return out
+    return simulate_bag(tmp_path_factory, "pipeline", SIM_ARGS)
 
 
 def _messages(bag: Path, raw_events: bool = False):
