@@ -203,9 +203,8 @@ def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str 
         record_counts: dict[str, int] = {}
         if recorder is not None and outputs:
             gt_rec = _ground_truth(gt_file, gt_samples)
-            if gt_rec is not None:  # the recorder wants the base pose; a camera ground truth is moved onto it
-                recorder.write_ground_truth(gt_rec if frame == "base" else
-                                            gt_rec.transformed(T_right=se3_inv(config.rig.T_base_rgb_matrix())))
+            if gt_rec is not None:  # the recorder wants the base pose
+                recorder.write_ground_truth(_in_frame(gt_rec, source.default_frame, "base", config))
             record_counts = recorder.close()
     except BaseException:
         if recorder is not None:
@@ -249,8 +248,13 @@ def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str 
         timing["recording"] = {"path": str(record), "messages": record_counts}
     outputs.write_json(out / "timing.json", timing, "frames")
     gt = _ground_truth(gt_file, gt_samples)
+    if gt is not None and frame != source.default_frame:
+        # ground truth comes in the recording's frame (a bag's base, a TUM folder's camera): score like with like
+        gt = _in_frame(gt, source.default_frame, frame, config)
+        notes.append(f"ground truth moved from the {_FRAME_NAMES[source.default_frame]} to the "
+                     f"{_FRAME_NAMES[frame]} with rig.T_base_rgb, as the estimate")
     if gt_file is None and gt is not None:
-        write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {name}")
+        write_tum(out / "groundtruth.tum", gt, header=f"ground truth from {name} ({_FRAME_NAMES[frame]})")
     eval_result = None
     if gt is not None:
         ok = np.array([s == "ok" for s in statuses])
@@ -268,6 +272,17 @@ def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str 
         raise TrackingError(f"not a single frame of {name} could be tracked ({len(statuses)} frames): {why}; "
                             f"outputs in {out}")
     return result
+
+
+_FRAME_NAMES = {"base": "robot base", "camera": "colour optical frame"}
+
+
+def _in_frame(traj: Trajectory, from_frame: str, to_frame: str, config: AtsvoConfig) -> Trajectory:
+    """``traj`` (poses of ``from_frame`` in some world) as poses of ``to_frame`` (``base`` or ``camera``)."""
+    if from_frame == to_frame:
+        return traj
+    T_base_rgb = config.rig.T_base_rgb_matrix()
+    return traj.transformed(T_right=T_base_rgb if to_frame == "camera" else se3_inv(T_base_rgb))
 
 
 def _ground_truth(gt_file: Any, gt_samples: PoseLog | None) -> Any:
@@ -360,7 +375,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="bundled preset (default: chosen from the bag's topics, or a TUM folder's name); "
                              "--config wins")
     parser.add_argument("--mode", choices=("fused", "rgbd"), help="fused (events + RGB-D) or rgbd (never events)")
-    parser.add_argument("--gt", help="ground truth TUM file (default: the bag's pose topic, if any)")
+    parser.add_argument("--gt", help="ground truth TUM file, poses of the recording's own frame (a bag's robot "
+                                      "base, a TUM folder's camera) (default: the bag's pose topic, if any)")
     parser.add_argument("--frame", choices=("base", "camera"), default=None,
                         help="pose written to trajectory.tum: robot base (default) or colour optical frame "
                              "(default for a TUM folder)")

@@ -99,6 +99,15 @@ def test_rgbd_mode_and_camera_frame(tmp_path, fake):
     T_base_rgb = fake.instances[0].T_base_rgb
     expected = se3_inv(gt_pose(0.0)) @ gt_pose((traj.stamps_ns[3] - T0) * 1e-9) @ T_base_rgb
     np.testing.assert_allclose(traj.T_w_b[3], expected, atol=1e-8)
+    # the bag's ground truth is the base: it is moved to the camera before scoring (it once scored camera
+    # poses against base poses: 50 cm "ATE" and "diverged" for a perfect estimate)
+    assert not np.allclose(T_base_rgb, np.eye(4))
+    assert res.metrics["ate_rmse_m"] < 1e-6 and res.metrics["rpe_rot_deg_per_frame"] < 1e-3
+    assert any("ground truth moved from the robot base to the colour optical frame" in n for n in res.notes)
+    gt_written = read_tum(tmp_path / "out" / "groundtruth.tum")
+    i = int(np.argmin(np.abs(gt_written.stamps_ns - traj.stamps_ns[3])))
+    np.testing.assert_allclose(gt_written.T_w_b[i][:3, :3], (gt_pose((gt_written.stamps_ns[i] - T0) * 1e-9)
+                                                            @ T_base_rgb)[:3, :3], atol=1e-6)
 
 
 def test_bag_without_events_runs_rgbd_and_external_gt(tmp_path, fake):
