@@ -85,6 +85,17 @@ def check_record_path(path: str | Path, force: bool = False, inputs: Sequence[st
         raise RecordError(f"--record {out} is a directory; name a .mcap file")
     if out.exists() and not force:
         raise RecordError(f"--record {out} exists (use --force to replace it)")
+    for parent in out.parents:  # the folder it goes into: there (or creatable) and writable, checked now
+        if parent.exists():
+            if not parent.is_dir():
+                raise RecordError(f"--record {out} is under {parent}, which is a file, not a folder")
+            break
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out.parent):
+            pass
+    except OSError as exc:
+        raise RecordError(f"--record {out} is not writable: {exc.strerror or exc}") from None
     mcap_storage()
     return out
 

@@ -99,6 +99,12 @@ def test_output_checks_before_a_run(tmp_path, monkeypatch):
     with pytest.raises(RecordError, match="exists .use --force"):
         check_record_path(existing)
     assert check_record_path(existing, force=True) == existing
+    # where it cannot be written: one line before the run, not a traceback after it
+    with pytest.raises(RecordError, match="is under .*old.mcap, which is a file, not a folder"):
+        check_record_path(existing / "x.mcap")
+    with pytest.raises(RecordError, match="is not writable"):
+        check_record_path(Path("/proc/run.mcap"))
+    assert check_record_path(tmp_path / "new" / "sub" / "run.mcap").parent.is_dir()  # its folder is made
 
     from rosbags.rosbag2 import Writer
 
