@@ -9,7 +9,7 @@ from collections.abc import Callable, Sequence
 
 from atsvo_ros.bench import ats, ats_quality, events, longrun, nodes, real, tracking
 from atsvo_ros.bench.suite import add_all_args, main_all
-from atsvo_ros.tools._cli import run
+from atsvo_ros.tools._cli import prepare_out_dir, run
 
 AddArgs = Callable[[argparse.ArgumentParser], None]
 Main = Callable[[argparse.Namespace], "int | None"]
@@ -47,6 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    if getattr(args, "out", None):  # an unusable --out fails now, not after the benchmark
+        prepare_out_dir(args.out)
     if args.command is None:
         return main_all(args)
     return int(args._target(args) or 0)

@@ -85,8 +85,12 @@ class EvalOptions:
     def __post_init__(self) -> None:
         if self.align not in ALIGN_METHODS:
             raise EvaluationError(f"unknown alignment {self.align!r} (choose one of {', '.join(ALIGN_METHODS)})")
-        if not self.max_diff_s >= 0 or not self.align_s > 0 or not 0 < self.delta_deg <= 180:
-            raise EvaluationError("max_diff_s must be >= 0, align_s > 0 and delta_deg in (0, 180]")
+        for ok, what, value in ((self.max_diff_s >= 0, "max_diff_s (--t-max-diff) must be >= 0", self.max_diff_s),
+                                (self.align_s > 0, "align_s (--align-s) must be > 0", self.align_s),
+                                (0 < self.delta_deg <= 180, "delta_deg (--delta-deg) must be in (0, 180]",
+                                 self.delta_deg)):
+            if not ok:  # NaN fails every comparison, so it lands here too
+                raise EvaluationError(f"{what}, got {value:g}")
 
 
 @dataclass

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from atsvo_ros.config import load_config
-from atsvo_ros.errors import SimulationError
+from atsvo_ros.errors import ConfigError, SimulationError
 from atsvo_ros.eval.metrics import ASSOCIATION_TEXT, describe_alignment
 from atsvo_ros.eval.plots import plot_comparison
 from atsvo_ros.sim.sequence import SequenceSpec, model_key
@@ -203,6 +203,8 @@ def _main(args: argparse.Namespace) -> int:
         if getattr(args, flag) is not None:
             sim_args += [f"--{flag.replace('_', '-')}", f"{getattr(args, flag):g}"]
     check_sequence(args.scenario, args.duration, args.seed, args.width, args.height, args.event_scale)
+    if args.max_ate_cm is not None and not args.max_ate_cm > 0:  # NaN too: no run could pass it
+        raise ConfigError(f"--max-ate-cm must be a positive number of centimetres, got {args.max_ate_cm:g}")
     try:
         rows = demo(out, args.scenario, args.duration, args.seed, args.cache, args.regenerate,
                     progress=False if args.no_progress else None, sim_args=sim_args)

@@ -1,6 +1,8 @@
 """``atsvo-bench``'s command line: every benchmark registered as a subcommand."""
 from __future__ import annotations
 
+import pytest
+
 from atsvo_ros.bench.cli import SUBCOMMANDS, build_parser
 from atsvo_ros.bench.events import bench_decode, main_events
 
@@ -13,3 +15,15 @@ def test_bench_front_end_and_decode_part_run():
     rows = bench_decode(3000, 1000, 1)
     assert {r["encoding"] for r in rows} >= {"libcaer_cmp", "libcaer", "mono", "evt3"}
     assert all(r["ours_eps"] > 0 and r["rosbags_eps"] > 0 for r in rows)
+
+
+def test_an_unusable_out_is_refused_before_the_benchmark_runs(tmp_path, capsys, monkeypatch):
+    from atsvo_ros.bench import real as real_mod
+    from atsvo_ros.bench.cli import main
+
+    monkeypatch.setattr(real_mod, "bench_folder", lambda *a, **k: pytest.fail("the benchmark ran before --out"))
+    existing = tmp_path / "results.json"
+    existing.touch()
+    assert main(["real", str(tmp_path), "--no-paper", "--out", str(existing), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.strip() == f"atsvo-bench: error: --out {existing} is a file, not a folder", err

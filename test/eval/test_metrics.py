@@ -139,3 +139,13 @@ def test_sum_ratio_per_degree_in_extra():
     res = evaluate(gt, Trajectory(gt.stamps_ns, T), EvalOptions(align="none"))
     assert res.extra["rpe_trans_cm_per_deg_sum_ratio"] == pytest.approx(0.1, rel=0.05)
     assert res.extra["rpe_rot_deg_per_deg_sum_ratio"] == pytest.approx(0.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"align_s": 0.0}, r"align_s \(--align-s\) must be > 0, got 0"),
+    ({"max_diff_s": -1.0}, r"max_diff_s \(--t-max-diff\) must be >= 0, got -1"),
+    ({"delta_deg": float("nan")}, r"delta_deg \(--delta-deg\) must be in \(0, 180\], got nan"),
+])
+def test_a_bad_option_is_named_with_its_value(kwargs, message):
+    with pytest.raises(EvaluationError, match=message):
+        EvalOptions(**kwargs)

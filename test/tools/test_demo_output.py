@@ -60,3 +60,9 @@ def test_r01_demo_out_not_writable_is_refused_before_the_generation(tmp_path, ca
     assert demo_mod.main([*R12, "--out", str(unwritable_dir / "demo")]) == 1
     assert f"--out {unwritable_dir / 'demo'} is not writable: " in _one_error_line(capsys)
     assert not (tmp_path / "cache").exists()
+
+
+@pytest.mark.parametrize("limit", ["-1", "0", "nan"])
+def test_an_impossible_accuracy_limit_is_refused_before_the_generation(tmp_path, capsys, limit, no_generation):
+    assert demo_mod.main([*R12, "--out", str(tmp_path / "demo"), "--max-ate-cm", limit]) == 1
+    assert "--max-ate-cm must be a positive number of centimetres" in _one_error_line(capsys)
