@@ -282,7 +282,14 @@ def open_source(paths: list[Path], topics: dict[str, str | None] | None, config:
     if is_tum_folder(paths[0]):
         if len(paths) > 1:
             raise BagError("give one TUM RGB-D folder (the one holding rgb.txt and depth.txt)")
+        flags = [f"--{role.replace('_', '-')}-topic" for role, topic in (topics or {}).items() if topic]
+        if flags:
+            raise BagError(f"{' and '.join(flags)} {'do' if len(flags) > 1 else 'does'} not apply to a TUM RGB-D "
+                           f"folder: {paths[0]} is read from rgb.txt, depth.txt and groundtruth.txt")
         return TumSource(paths[0])
+    if paths[0].is_dir() and (paths[0] / "rgb.txt").is_file():
+        raise BagError(f"{paths[0]} has rgb.txt but no depth.txt: a TUM RGB-D folder needs both (the odometry needs "
+                       "depth)")
     if paths[0].suffix.lower() in (".hdf5", ".h5"):
         if len(paths) > 1:
             raise BagError("give one MVSEC *_data.hdf5 file (its *_gt.hdf5 sibling is found automatically)")

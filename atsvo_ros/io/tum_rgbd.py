@@ -323,7 +323,9 @@ class TumSource:
     def setup(self, config: Any, notes: list[str]):
         notes.append(f"TUM folder: {self.reader.summary()}; cameras and extrinsics from the configuration")
         if not np.isclose(config.rig.depth_scale_m, TUM_DEPTH_SCALE_M, rtol=1e-9):
-            notes.append(f"rig.depth_scale_m = {config.rig.depth_scale_m} differs from TUM's 1/5000 m")
+            notes.append(f"warning: rig.depth_scale_m = {config.rig.depth_scale_m:g} differs from TUM's 1/5000 m, so "
+                         f"depths are read {config.rig.depth_scale_m / TUM_DEPTH_SCALE_M:g}x what the files say; "
+                         "a TUM dataset wants --preset tum_fr1|tum_fr2|tum_fr3 (or --set rig.depth_scale_m=0.0002)")
         self._rig = config.rig
         return config, CameraModel.from_config(config.rgb_camera), CameraModel.from_config(config.event_camera)
 

@@ -220,6 +220,28 @@ def test_replay_reads_a_tum_folder_with_its_preset_and_camera_frame(synth, tmp_p
     assert res.metrics["ate_rmse_m"] < 0.015, res.metrics
 
 
+def test_tum_folder_user_errors_are_one_line(synth, tmp_path, capsys):
+    """Topic flags do not apply, a folder without depth.txt is named as such, a non-TUM depth scale is a warning."""
+    import shutil
+
+    from atsvo_ros.errors import BagError
+    from atsvo_ros.io.sources import open_source
+    from atsvo_ros.io.tum_rgbd import TumSource
+
+    folder, _ = synth
+    with pytest.raises(BagError, match="--rgb-topic does not apply to a TUM RGB-D folder"):
+        open_source([folder], {"rgb": "/foo", "depth": None}, None)
+    only_rgb = tmp_path / "only_rgb"
+    only_rgb.mkdir()
+    shutil.copy(folder / "rgb.txt", only_rgb / "rgb.txt")
+    with pytest.raises(BagError, match="has rgb.txt but no depth.txt"):
+        open_source([only_rgb], None, None)
+    notes: list[str] = []
+    TumSource(folder).setup(load_config("mini_cheetah"), notes)
+    assert any(n.startswith("warning: rig.depth_scale_m = 0.001 differs from TUM's 1/5000 m, so depths are read 5x")
+               for n in notes), notes
+
+
 def test_replay_cli_preset_choice_overrides_the_folder_name(synth, tmp_path):
     from atsvo_ros.tools.replay import build_parser
 
