@@ -31,7 +31,7 @@ from tqdm import tqdm
 from atsvo_ros.config import AtsvoConfig, config_dir, load_config, parse_overrides
 from atsvo_ros.core.frame import TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
-from atsvo_ros.errors import BagError, ConfigError, TrackingError
+from atsvo_ros.errors import BagError, ConfigError, EvaluationError, TrackingError
 from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics, metrics_json
 from atsvo_ros.eval.plots import plot_run
 from atsvo_ros.io.record import BagRecorder, check_record_path
@@ -259,7 +259,11 @@ def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str 
     if gt is not None:
         ok = np.array([s == "ok" for s in statuses])
         opts = eval_options or EvalOptions(interpolate_gt=True)
-        eval_result = evaluate(gt, est, opts, est_ok=ok)
+        try:
+            eval_result = evaluate(gt, est, opts, est_ok=ok)
+        except EvaluationError as exc:  # the run's outputs are there: say so, they can be scored again
+            raise EvaluationError(f"{exc} (the run's trajectory.tum and timing.json are in {out}: score them "
+                                  "with atsvo-eval against the right ground truth)") from None
         result.metrics = eval_result.to_json()
         result.evaluation = eval_result
         notes.extend(result.metrics["extra"]["notes"])

@@ -13,7 +13,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-from atsvo_ros.errors import OutputError
+from atsvo_ros.errors import ConfigError, OutputError
 from atsvo_ros.sim.events import MAX_CONTRAST, MAX_NOISE_RATE_HZ, MAX_REFRACTORY_S, MAX_SCAN_PERIOD_S, EventModel
 from atsvo_ros.sim.motion import SCENARIOS
 from atsvo_ros.sim.sequence import (
@@ -57,6 +57,12 @@ def check_out_parent(out: str | Path) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
+    resized = [f for f, on in (("--width", args.width is not None), ("--height", args.height is not None),
+                               ("--event-scale", args.event_scale != 1.0)) if on]
+    if args.layout == "mvsec" and resized and args.config is None:
+        # the mvsec preset a replay takes for this bag fixes the DAVIS346's 346x260 (camera_info is not used)
+        raise ConfigError(f"{' and '.join(resized)} with --layout mvsec: the bag would not replay with the mvsec "
+                          "preset (the DAVIS346, 346x260); give --config with a rig of that size, or leave them out")
     check_out_parent(args.out)
     spec = SequenceSpec(scenario=args.scenario, duration_s=args.duration, seed=args.seed, layout=args.layout,
                         config=args.config, width=args.width, height=args.height, rate_hz=args.rate,

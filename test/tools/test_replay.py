@@ -263,3 +263,17 @@ def test_set_alone_goes_on_the_preset_the_recording_names(tmp_path, monkeypatch,
     assert "synthetic" in json.dumps(notes) and "with 1 --set override" in json.dumps(notes)
     with pytest.raises(ConfigError, match="overrides go with config=None"):
         real_replay(bag, tmp_path / "o2", load_config("synthetic"), overrides={"mode": "rgbd"})
+
+
+def test_ground_truth_of_another_time_says_where_the_run_was_written(tmp_path, fake):
+    from atsvo_ros.errors import EvaluationError
+    from atsvo_ros.io.trajectory import Trajectory, write_tum
+
+    bag = write_bag(tmp_path / "seq", "mcap", n_frames=6, events=False, gt=False)
+    gt = tmp_path / "gt.tum"
+    stamps = T0 + 10**12 + np.arange(0, 100) * 10_000_000  # 1000 s later: no overlap
+    write_tum(gt, Trajectory(stamps, np.stack([np.eye(4)] * len(stamps))))
+    with pytest.raises(EvaluationError, match="time ranges do not overlap.*trajectory.tum and timing.json are in"):
+        replay(bag, tmp_path / "out", load_config("synthetic"), gt_path=gt, odometry_factory=fake, plots=False,
+               progress=False)
+    assert (tmp_path / "out" / "trajectory.tum").is_file()

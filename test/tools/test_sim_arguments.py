@@ -102,3 +102,10 @@ def test_sim_force_still_refuses_foreign_files_and_needs_force(tmp_path, capsys,
     (out / "notes.txt").touch()
     assert main([*R12, "--duration", "0.2", "--out", str(out)]) == 1
     assert "holds notes.txt, which atsvo-sim did not write" in _one_error_line(capsys)
+
+
+def test_a_resized_mvsec_layout_is_refused_as_it_would_not_replay(tmp_path, capsys, no_generation):
+    """The mvsec preset a replay takes for the bag fixes the DAVIS346: 160x120 colour gave 'no frame could be used'."""
+    assert main([*R12, "--duration", "0.2", "--layout", "mvsec", "--out", str(tmp_path / "s")]) == 1
+    assert ("--width and --height and --event-scale with --layout mvsec: the bag would not replay"
+            in _one_error_line(capsys))
