@@ -45,6 +45,7 @@ from atsvo_ros.core.geometry import interpolate_trajectory, se3_inv
 from atsvo_ros.core.mapping.map import MapSnapshot
 from atsvo_ros.errors import RecordError
 from atsvo_ros.io.msgtypes import transient_local_qos, typestore
+from atsvo_ros.io.paths import ensure_writable_folder
 from atsvo_ros.io.ros_out import (
     DEBUG_IMAGE_FRAME,
     MAP_CLOUD_FIELDS,
@@ -85,17 +86,7 @@ def check_record_path(path: str | Path, force: bool = False, inputs: Sequence[st
         raise RecordError(f"--record {out} is a directory; name a .mcap file")
     if out.exists() and not force:
         raise RecordError(f"--record {out} exists (use --force to replace it)")
-    for parent in out.parents:  # the folder it goes into: there (or creatable) and writable, checked now
-        if parent.exists():
-            if not parent.is_dir():
-                raise RecordError(f"--record {out} is under {parent}, which is a file, not a folder")
-            break
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out.parent):
-            pass
-    except OSError as exc:
-        raise RecordError(f"--record {out} is not writable: {exc.strerror or exc}") from None
+    ensure_writable_folder(out.parent, out, "--record", RecordError)  # the folder it goes into, checked now
     mcap_storage()
     return out
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from atsvo_ros.errors import AtsvoError, OutputError
+from atsvo_ros.io.paths import ensure_writable_folder
 
 
 def run(main: Callable[[argparse.Namespace], int | None], parser: argparse.ArgumentParser,
@@ -52,18 +52,7 @@ def prepare_out_dir(path: str | Path, what: str = "--out") -> Path:
             no permission, a read-only file system.
     """
     out = Path(path)
-    for parent in [out, *out.parents]:
-        if parent.exists():
-            if not parent.is_dir():
-                where = "is" if parent == out else f"is under {parent}, which is"
-                raise OutputError(f"{what} {out} {where} a file, not a folder")
-            break
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as exc:
-        raise OutputError(f"{what} {out} is not writable: {exc.strerror or exc}") from None
+    ensure_writable_folder(out, out, what, OutputError)
     return out
 
 
