@@ -7,6 +7,7 @@ pixels (0, NaN, outside the valid range) set to 0.
 """
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import cv2
@@ -106,11 +107,14 @@ def colour_from_msg(msg: Any) -> np.ndarray:
 def depth_to_metres(raw: np.ndarray, depth_scale_m: float, depth_min_m: float, depth_max_m: float) -> np.ndarray:
     """float32 metres from a uint16 (scaled by ``depth_scale_m``) or float (metres) depth array.
 
-    Zero, NaN, inf and values outside ``[depth_min_m, depth_max_m]`` become 0 (invalid).
+    Zero, NaN, inf and values outside ``[depth_min_m, depth_max_m]`` become 0 (invalid). uint16 goes
+    through a 65,536-entry table (one gather instead of four passes over the image; same values).
     """
     raw = np.asarray(raw)
     if raw.ndim != 2:
         raise ImageError(f"depth image must be single channel, got shape {raw.shape}")
+    if raw.dtype == np.uint16:
+        return _depth_table(float(depth_scale_m), float(depth_min_m), float(depth_max_m))[raw]
     if raw.dtype.kind in "ui":
         depth = raw * float(depth_scale_m)  # float64: the range check is exact at the limits
     elif raw.dtype.kind == "f":
@@ -120,6 +124,15 @@ def depth_to_metres(raw: np.ndarray, depth_scale_m: float, depth_min_m: float, d
     bad = ~np.isfinite(depth) | (depth < depth_min_m) | (depth > depth_max_m)
     depth[bad] = 0.0
     return depth.astype(np.float32)
+
+
+@functools.lru_cache(maxsize=8)
+def _depth_table(depth_scale_m: float, depth_min_m: float, depth_max_m: float) -> np.ndarray:
+    """float32 metres of every uint16 value (the general path of :func:`depth_to_metres` on all of them)."""
+    table = depth_to_metres(np.arange(65536, dtype=np.int32).reshape(1, -1), depth_scale_m, depth_min_m,
+                            depth_max_m)[0]
+    table.flags.writeable = False
+    return table
 
 
 def depth_from_msg(msg: Any, depth_scale_m: float = 0.001, depth_min_m: float = 0.0,

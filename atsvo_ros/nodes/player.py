@@ -67,6 +67,7 @@ class BagPlayer:
         self.rgb_topic, self.depth_topic, self.events_topic = rgb_topic, depth_topic, events_topic
         self._events_msgtype: str | None = None
         self._events_all = None
+        self._repacketized: dict[int, list[tuple[int, str, bytes, int | None]]] = {}  # packet ns -> messages
         wanted = set(topics)
         self.messages: list[tuple[int, str, bytes, int | None]] = []  # (log time, topic, cdr, header stamp)
         self.publishers: dict[str, Any] = {}
@@ -104,7 +105,8 @@ class BagPlayer:
 
         A camera driver publishes event packets at a fixed wall-clock rate (about 1 kHz), so a recording
         played ``rate`` times faster should arrive in packets of ``rate`` ms, not ``rate`` times as many
-        1 ms packets. EventPacket streams only (re-encoded in their own encoding).
+        1 ms packets. EventPacket streams only (re-encoded in their own encoding). Kept per ``packet_s``:
+        cutting and re-encoding takes seconds of CPU that must not fall inside a timed run (call it first).
         """
 
         if self.events_topic is None or not (self._events_msgtype or "").endswith("EventPacket"):
@@ -118,6 +120,8 @@ class BagPlayer:
         if not len(events):
             return rest
         step = max(1, int(round(packet_s * 1e9)))
+        if step in self._repacketized:
+            return self._repacketized[step]
         edges = np.arange(events.t_first_ns, events.t_last_ns + step, step, dtype=np.int64)
         cuts = np.searchsorted(events.t, edges, side="left")
         packets = []
@@ -125,7 +129,8 @@ class BagPlayer:
             if b > a:
                 batch = events.select(slice(int(a), int(b)))
                 packets.append((batch.t_last_ns, self.events_topic, serialize_event_packet(batch, encoding), None))
-        return sorted(rest + packets, key=lambda m: m[0])
+        self._repacketized[step] = sorted(rest + packets, key=lambda m: m[0])
+        return self._repacketized[step]
 
     def play(self, rate: float = 1.0, first: int = 0, last: int | None = None,
              event_packet_wall_s: float | None = None, repeat: int = 1) -> Played:
@@ -324,6 +329,16 @@ def rss_mb(pid: int) -> float | None:
     return None
 
 
+def cpu_s(pid: int) -> float | None:
+    """CPU seconds (user + system, all threads) a process has used (Linux /proc), None when it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 class NodeProcesses:
     """Node processes started from their console scripts; RSS sampled in the background; stopped with SIGINT."""
 
@@ -342,6 +357,10 @@ class NodeProcesses:
     def _sample(self, period_s: float) -> None:
         while not self._stop.wait(period_s):
             self.rss.append((time.monotonic(), [rss_mb(p.pid) for p in self.procs]))
+
+    def cpu_s(self) -> float:
+        """CPU seconds used so far by all the node processes (those still running)."""
+        return sum(c for p in self.procs if (c := cpu_s(p.pid)) is not None)
 
     def log_tail(self, n: int = 2000) -> str:
         return " | ".join(Path(log).read_text()[-n:] for log in self.logs)
@@ -440,4 +459,4 @@ def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: lis
 
 
 __all__ = ["BagPlayer", "NodeProcesses", "NodeSession", "OdometryProbe", "Played", "console_script", "message_class",
-           "node_session", "rss_mb", "spin_in_background", "stop_spinning"]
+           "node_session", "cpu_s", "rss_mb", "spin_in_background", "stop_spinning"]

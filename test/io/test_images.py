@@ -110,3 +110,17 @@ def test_camera_info(ros):
         **dict(zip(names, (np.array([0.1, 0.0, 0, 0, 0]), K, np.eye(3).reshape(-1), np.zeros(12)))))
     cam = camera_from_info(info)
     assert (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy) == (320, 240, 300.0, 301.0, 160.0, 120.0)
+
+
+@pytest.mark.parametrize("scale,lo,hi", [(0.001, 0.0, np.inf), (0.0002, 0.3, 6.0), (1 / 5000, 0.1, 4.0),
+                                         (0.001, 1.0, 1.0)])
+def test_uint16_depth_table_equals_the_general_path(scale, lo, hi):
+    """The uint16 look-up table gives the float64 range check and float32 values of the general path, bit for bit
+    (every value, including the limits themselves, zero and 65535)."""
+    every = np.arange(65536, dtype=np.uint16).reshape(256, 256)
+    fast = depth_to_metres(every, scale, lo, hi)
+    general = depth_to_metres(every.astype(np.int32), scale, lo, hi)
+    assert fast.dtype == np.float32 and fast.shape == every.shape
+    np.testing.assert_array_equal(fast.view(np.uint32), general.view(np.uint32))
+    fast[0, 0] = 7.0  # the caller owns its image: the shared table is not written through it
+    assert depth_to_metres(every, scale, lo, hi)[0, 0] == 0.0

@@ -185,6 +185,8 @@ def _check_common(run: Run) -> None:
     # what the issue asks /diagnostics to carry: mode, status, tracking time, queue and decoder drops, rates
     assert {"mode", "status", "tracking_time_ms_p50", "queue_drops", "decoder_drops", "rate_rgb_hz",
             "rate_event_msgs_hz", "rate_odometry_hz"} <= set(d) and d["mode"] in ("fused", "rgbd"), d
+    # the worker's own CPU is part of its wall time per frame (the rest waited for a core or the GIL)
+    assert 0.0 < float(d["worker_cpu_ms_mean"]) <= float(d["worker_ms_mean"]) * 1.01 + 0.1, d
     # the last frame, whose events and IMU samples past its stamp never come, went out once the inputs fell silent
     assert int(d["frames_waiting"]) == 0, why
     assert len(run.statuses) == len(run.stamps) and run.probe.maps, "per-frame status or map missing"
@@ -282,7 +284,8 @@ def test_asynchronous_nodes_are_as_accurate_as_the_replay(sequence, scripts):
             assert (ats[-1].encoding, sel[-1].encoding, ats[-1].width) == ("mono8", "rgb8", 80)
         ate, ref = _ate(run, gt), _inline_over_the_same_frames(bag, run.stamps, gt)
         d = run.diag
-        keys = ("queue_drops", "keyframes", "mapping", "mapping_timeouts", "mapping_round_trip_ms", "worker_ms_mean")
+        keys = ("queue_drops", "keyframes", "mapping", "mapping_timeouts", "mapping_round_trip_ms", "worker_ms_mean",
+                "worker_cpu_ms_mean")
         why = (ate, ref, metrics["ate_rmse_m"], {k: d[k] for k in keys if k in d},
                {s: run.statuses.count(s) for s in set(run.statuses)})
         if ate <= max(1.5 * ref, ref + 0.005):

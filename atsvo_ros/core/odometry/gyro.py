@@ -24,6 +24,7 @@ class GyroBuffer:
     def __init__(self, R_rgb_imu: np.ndarray) -> None:
         self.R_rgb_imu = R_rgb_imu
         self._batches: deque[ImuBatch] = deque()
+        self._joined: ImuBatch | None = None  # the batches as one, until the next add (several queries per frame)
 
     def __bool__(self) -> bool:
         """Whether any samples are buffered."""
@@ -34,6 +35,7 @@ class GyroBuffer:
         if len(batch) == 0:
             return
         self._batches.append(batch)
+        self._joined = None
         newest = batch.t_last_ns
         while self._batches and self._batches[0].t_last_ns < newest - self.BUFFER_NS:
             self._batches.popleft()
@@ -46,8 +48,10 @@ class GyroBuffer:
         """
         if not self._batches:
             return None
+        if self._joined is None:
+            self._joined = ImuBatch.concatenate(list(self._batches))
         try:
-            return gyro_rotation(ImuBatch.concatenate(list(self._batches)), t0_ns, t1_ns)
+            return gyro_rotation(self._joined, t0_ns, t1_ns)
         except ImuError:
             return None
 
