@@ -404,6 +404,10 @@ class NodeConfig:
                            "measured to take every 1 kHz event packet where rclpy's Python executors lost 30-65 %), "
                            "or rclpy's multi_threaded / single_threaded executors. The odometry and mapping run in "
                            "their own threads either way")
+    core_process: bool = _f(False, doc="atsvo_node: run the odometry core (tracking, its mapping thread, the event-map "
+                            "builder) in a child process, started and warmed up before subscribing; the worker then no "
+                            "longer waits for the GIL that the executor's callbacks hold (docs/nodes.md). No debug "
+                            "images in this mode (the time surface lives in the child); about 250 MB more memory")
     mapping_timeout_s: float = _f(5.0, 0.0, 600.0, lo_open=True,
                                   doc="tracking_node + mapping_node: a keyframe request unanswered this long is given "
                                       "up (counted); also the longest a synchronous insert waits")

@@ -461,3 +461,39 @@ def test_a_dead_stream_still_releases_frames_with_the_arrival_clock(bag):
     wait_frames = int(cfg.node.imu_max_wait_s / 0.033) + 1
     assert len(seen) >= n_frames - 1 - wait_frames
     assert rt.counters["frames_without_imu"] > 0 and rt.assembler.stats.released_without_events > 0
+
+
+def test_the_core_in_a_process_of_its_own_gives_the_same_poses(bag):
+    """``node.core_process``: frames, events and IMU samples go to a child process and the same poses come back
+    (synchronous mapping, as the replay), with the map snapshots first; a second core in the same child starts
+    over; an AtsvoError in the child is raised here and the child goes on; a dead child is one clear error."""
+    from atsvo_ros.core.frame import RgbdFrame
+    from atsvo_ros.errors import AtsvoError
+    from atsvo_ros.runtime.core_process import CoreHost, CoreProcessError
+
+    cfg = load_config("synthetic", overrides={"mapping.synchronous": True})
+    _, ref = _run(bag, cfg, raw_events=True)
+    snapshots = []
+    host = CoreHost(cfg, use_events=True, on_snapshot=snapshots.append)
+    try:
+        for attempt in (1, 2):  # the second runtime's core replaces the first one in the child
+            rt, outputs = _run(bag, cfg, factory=host.new_core, raw_events=True)
+            assert [o.result.stamp_ns for o in outputs] == [o.result.stamp_ns for o in ref]
+            assert [o.result.status for o in outputs] == [o.result.status for o in ref]
+            np.testing.assert_array_equal(np.stack([o.result.T_odom_base for o in outputs]),
+                                          np.stack([o.result.T_odom_base for o in ref]))
+            assert sum(o.result.keyframe_inserted for o in outputs) == len(snapshots) / attempt > 0
+        core = host.new_core(cfg, rt.rgb_camera)
+        with pytest.raises(AtsvoError):  # a depth image of the wrong size: the core's own error, through the pipe
+            core.process_frame(RgbdFrame(1, np.zeros((120, 160, 3), np.uint8), np.zeros((5, 5), np.float32)))
+        good = ref[0].result
+        assert core.process_frame(RgbdFrame(good.stamp_ns, np.full((120, 160, 3), 128, np.uint8),
+                                            np.full((120, 160), 2.0, np.float32))).stamp_ns == good.stamp_ns
+        host._proc.kill()
+        host._proc.join()
+        with pytest.raises(CoreProcessError, match="core process"):
+            core.process_frame(RgbdFrame(good.stamp_ns + 1, np.zeros((120, 160, 3), np.uint8),
+                                         np.full((120, 160), 2.0, np.float32)))
+    finally:
+        host.close()
+    assert not host._proc.is_alive()

@@ -72,6 +72,8 @@ def add_nodes_args(p: argparse.ArgumentParser) -> None:
                    help="play the sequence this many times back to back in each load run (stamps moved on, so "
                         "time keeps running; the scene jumps back to its start at each loop): a long run from "
                         "a short bag, for the memory trend (default 1)")
+    p.add_argument("-p", "--ros-param", action="append", default=[], metavar="NAME:=VALUE",
+                   help="one more node parameter (repeatable), e.g. -p node.core_process:=true")
     p.add_argument("--json", default=None, help="write the figures to this file")
 
 
@@ -115,6 +117,8 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path, repeat
     scripts = ["mapping_node", "tracking_node"] if args.split else ["atsvo_node"]
     ros_args = ["--ros-args", "--params-file", str(_params_file()), "-p", f"node.queue_size:={args.queue_size}",
                 "-p", f"mode:={args.mode}", "-p", "node.diagnostics_period_s:=0.5"]
+    for param in args.ros_param:
+        ros_args += ["-p", param]
     with _hogs(args.hogs), node_session(bag, cfg, scripts, ros_args, log_dir, start_timeout_s=120.0,
                                         name="atsvo_bench_probe") as run:
         player, probe, procs = run.player, run.probe, run.procs
@@ -201,10 +205,14 @@ def main_nodes(args: argparse.Namespace) -> int:
     """Calibrate at real time, then run each load; prints a table (and writes --json)."""
     if importlib.util.find_spec("rclpy") is None:
         raise AtsvoError("atsvo-bench nodes needs rclpy: pip install -e '.[ros]' && source .ci/ros_env.sh") from None
+    bad = [p for p in args.ros_param if ":=" not in p]
+    if bad:
+        raise AtsvoError(f"--ros-param {bad[0]!r}: expected NAME:=VALUE")
     bag = _sequence(args)
     log_dir = Path(args.json).parent / "bench_nodes_logs" if args.json else Path(".atsvo_cache") / "bench_nodes_logs"
     results: dict[str, Any] = {"sequence": str(bag), "nodes": "tracking_node + mapping_node" if args.split
-                               else "atsvo_node", "mode": args.mode, "queue_size": args.queue_size, "runs": {}}
+                               else "atsvo_node", "mode": args.mode, "queue_size": args.queue_size,
+                               "ros_params": args.ros_param, "runs": {}}
     ref = replay(bag, log_dir.parent / "bench_nodes_replay", load_config("synthetic"), mode=args.mode, plots=False,
                  progress=False)  # the nodes run config/synthetic.yaml
     gt = read_tum(ref.out_dir / "groundtruth.tum") if (ref.out_dir / "groundtruth.tum").is_file() else None

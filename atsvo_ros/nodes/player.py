@@ -329,6 +329,23 @@ def rss_mb(pid: int) -> float | None:
     return None
 
 
+def process_tree(pid: int) -> list[int]:
+    """``pid`` and every process it started, directly or not (Linux /proc; e.g. ``node.core_process``'s child)."""
+    parents: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        parents.setdefault(ppid, []).append(int(stat.parent.name))
+    tree, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        tree.append(p)
+        todo += parents.get(p, [])
+    return tree
+
+
 def cpu_s(pid: int) -> float | None:
     """CPU seconds (user + system, all threads) a process has used (Linux /proc), None when it is gone."""
     try:
@@ -337,6 +354,12 @@ def cpu_s(pid: int) -> float | None:
     except OSError:
         return None
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _tree_rss_mb(pid: int) -> float | None:
+    """Resident memory of a process and its children in MB, None when the process is gone."""
+    own = rss_mb(pid)
+    return None if own is None else own + sum(m for q in process_tree(pid)[1:] if (m := rss_mb(q)) is not None)
 
 
 class NodeProcesses:
@@ -356,11 +379,11 @@ class NodeProcesses:
 
     def _sample(self, period_s: float) -> None:
         while not self._stop.wait(period_s):
-            self.rss.append((time.monotonic(), [rss_mb(p.pid) for p in self.procs]))
+            self.rss.append((time.monotonic(), [_tree_rss_mb(p.pid) for p in self.procs]))
 
     def cpu_s(self) -> float:
-        """CPU seconds used so far by all the node processes (those still running)."""
-        return sum(c for p in self.procs if (c := cpu_s(p.pid)) is not None)
+        """CPU seconds used so far by all the node processes and their children (those still running)."""
+        return sum(c for p in self.procs for q in process_tree(p.pid) if (c := cpu_s(q)) is not None)
 
     def log_tail(self, n: int = 2000) -> str:
         return " | ".join(Path(log).read_text()[-n:] for log in self.logs)
@@ -459,4 +482,4 @@ def node_session(bag: str | Path, config: Any, scripts: list[str], ros_args: lis
 
 
 __all__ = ["BagPlayer", "NodeProcesses", "NodeSession", "OdometryProbe", "Played", "console_script", "message_class",
-           "node_session", "cpu_s", "rss_mb", "spin_in_background", "stop_spinning"]
+           "node_session", "cpu_s", "process_tree", "rss_mb", "spin_in_background", "stop_spinning"]

@@ -65,6 +65,7 @@ from atsvo_ros.nodes._ros import (
     stamp_msg,
     uint8_array,
 )
+from atsvo_ros.runtime.core_process import CoreHost
 from atsvo_ros.runtime.frame_queue import DropOldestQueue, Worker
 from atsvo_ros.runtime.mapping_remote import RemoteMapping, mapping_digest
 from atsvo_ros.runtime.runtime import OdometryRuntime
@@ -116,8 +117,17 @@ class TrackingNode(Node):
         def make_core(config, rgb_camera, event_camera=None):
             return Odometry(config, rgb_camera, event_camera, mapping=self._make_mapping_port)
 
+        # ---- node.core_process: the core in a child process of its own (atsvo_node's in-memory mapping only)
+        self._core_host: CoreHost | None = None
+        if nc.core_process and mapping != "memory":
+            log.warn("node.core_process applies to atsvo_node (mapping in memory); tracking_node keeps the core here")
+        elif nc.core_process:
+            self._core_host = CoreHost(cfg, use_events, on_snapshot=on_snapshot)
+            log.info(f"odometry core in process {self._core_host.pid} (warmed up in {self._core_host.warm_up_s:.2f} s)")
+
         # arrival clock: a stream is stalled when silent, not merely behind (backlogs drain unevenly)
-        self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=make_core,
+        factory = make_core if self._core_host is None else self._core_host.new_core  # the child builds the Odometry
+        self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=factory,
                                        clock=time.monotonic_ns)
         # loss-free mode (reliable inputs, synchronous mapping: every frame must count, as in the replay): the queue
         # holds a backlog of LOSS_FREE_QUEUE frames instead of node.queue_size. It cannot block: the default
@@ -381,6 +391,7 @@ class TrackingNode(Node):
                 self.tracking_ms.percentile(100),
             "worker_ms_p50": self.worker_ms.percentile(50), "worker_ms_mean": self.worker_ms.mean(),
             "worker_cpu_ms_mean": self.worker_cpu_ms.mean(),
+            "core": "in process" if self._core_host is None else f"child process {self._core_host.pid}",
             "latency_ms_p50": self.latency_ms.percentile(50), "latency_ms_p99": self.latency_ms.percentile(99),
             "stamp_to_odometry_ms_p50": self.stamp_latency_ms.percentile(50),
             "rgb_received": self.rgb_received, "depth_received": self.depth_received,
@@ -434,6 +445,8 @@ class TrackingNode(Node):
         close = getattr(self.runtime.core, "close", None)
         if close is not None:
             close()
+        if self._core_host is not None:
+            self._core_host.close()
 
 
 def main(args: list[str] | None = None) -> int:

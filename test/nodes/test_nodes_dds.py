@@ -79,12 +79,14 @@ class Run:
 
 
 def _run(sequence, scripts: list[str], synchronous: bool, queue_size: int, check_reset: bool = False,
-         debug_images: bool = False, reliable: bool = False) -> Run:
+         debug_images: bool = False, reliable: bool = False, params: tuple[str, ...] = ()) -> Run:
     bag, *_, base = sequence
     cfg = load_config("synthetic")
     args = ["--ros-args", "--params-file", str(PARAMS), "-p", f"mapping.synchronous:={str(synchronous).lower()}",
             "-p", f"node.queue_size:={queue_size}", "-p", "node.diagnostics_period_s:=0.25",
             "-p", f"node.sensor_qos:={'reliable' if reliable else 'best_effort'}"]
+    for param in params:
+        args += ["-p", param]
     with node_session(bag, cfg, scripts, args, base / "logs", reliable=reliable, debug_images=debug_images,
                       start_timeout_s=START_TIMEOUT_S, name="atsvo_test_probe") as session:
         player, probe, procs = session.player, session.probe, session.procs
@@ -241,15 +243,18 @@ def _inline_over_the_same_frames(bag: Path, tracked_ns: np.ndarray, gt: Trajecto
     return _ate_of(np.array(stamps, np.int64), np.stack(poses), statuses, gt)
 
 
-@pytest.mark.parametrize("scripts", [["atsvo_node"], ["mapping_node", "tracking_node"]], ids=["atsvo_node", "split"])
-def test_synchronous_nodes_give_the_replay_poses(sequence, scripts):
+@pytest.mark.parametrize("scripts,params", [(["atsvo_node"], ()), (["mapping_node", "tracking_node"], ()),
+                                            (["atsvo_node"], ("node.core_process:=true",))],
+                         ids=["atsvo_node", "split", "core_process"])
+def test_synchronous_nodes_give_the_replay_poses(sequence, scripts, params):
     """Loss-free mode (reliable inputs, mapping.synchronous): node.queue_size 2 gives way to a backlog that drops
-    nothing, and the node's odometry is the replay's, pose for pose."""
+    nothing, and the node's odometry is the replay's, pose for pose (also with the core in a child process)."""
     _, replay, *_ = sequence
     run = _run_delivered(sequence, scripts, synchronous=True, queue_size=2, check_reset=scripts == ["atsvo_node"],
-                         reliable=True)
+                         reliable=True, params=params)
     _check_common(run)
     d = run.diag
+    assert d["core"].startswith("child process" if params else "in process"), d
     assert d["queue_mode"] == "loss-free", d
     assert int(d["queue_drops"]) == 0 and int(d["sync_dropped_rgb"]) == 0 and int(d["decoder_drops"]) == 0
     assert int(d["count_event_msgs"]) > 2900 and int(d.get("count_imu_late", 0)) == 0, d
