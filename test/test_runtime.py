@@ -489,8 +489,10 @@ def test_the_core_in_a_process_of_its_own_gives_the_same_poses(bag):
         good = ref[0].result
         assert core.process_frame(RgbdFrame(good.stamp_ns, np.full((120, 160, 3), 128, np.uint8),
                                             np.full((120, 160), 2.0, np.float32))).stamp_ns == good.stamp_ns
+        assert host.alive
         host._proc.kill()
         host._proc.join()
+        assert not host.alive
         with pytest.raises(CoreProcessError, match="core process"):
             core.process_frame(RgbdFrame(good.stamp_ns + 1, np.zeros((120, 160, 3), np.uint8),
                                          np.full((120, 160), 2.0, np.float32)))

@@ -391,7 +391,8 @@ class TrackingNode(Node):
                 self.tracking_ms.percentile(100),
             "worker_ms_p50": self.worker_ms.percentile(50), "worker_ms_mean": self.worker_ms.mean(),
             "worker_cpu_ms_mean": self.worker_cpu_ms.mean(),
-            "core": "in process" if self._core_host is None else f"child process {self._core_host.pid}",
+            "core": "in process" if self._core_host is None else
+                    f"child process {self._core_host.pid}{'' if self._core_host.alive else ' (dead)'}",
             "latency_ms_p50": self.latency_ms.percentile(50), "latency_ms_p99": self.latency_ms.percentile(99),
             "stamp_to_odometry_ms_p50": self.stamp_latency_ms.percentile(50),
             "rgb_received": self.rgb_received, "depth_received": self.depth_received,

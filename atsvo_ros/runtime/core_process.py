@@ -11,7 +11,9 @@ frames as the node's own warm-up). :meth:`CoreHost.new_core` gives an
 :class:`~atsvo_ros.core.odometry.odometry.Odometry` in the child. ``add_imu`` and ``add_events`` are buffered
 and go with the next frame, in one message over a pipe; the frame's result comes back (or its
 :class:`~atsvo_ros.errors.AtsvoError`, raised again here), after every map snapshot that mapping made before it.
-A child that dies, or a bug in it, raises :class:`CoreProcessError`: the node treats it like a failed worker.
+A child that dies, or a bug in it, raises :class:`CoreProcessError` (an :class:`AtsvoError`) for every frame
+from then on: the runtime logs and counts them (``frames_failed``), and the node's diagnostics say the child
+is dead. The child is not restarted.
 
 The images and events of a frame (about 5 MB at 640x480 during a backflip, 20 MB at its peak) do not go through
 the pipe: pickled through a pipe they cost the worker 11 ms of CPU a frame and the round trip 20 ms more. Their
@@ -217,6 +219,11 @@ class CoreHost:
         if kind != "ready":
             raise CoreProcessError(f"the core process said {kind!r} instead of ready")
         self.warm_up_s = float(payload)
+
+    @property
+    def alive(self) -> bool:
+        """Whether the child still runs."""
+        return self._proc.is_alive()
 
     @property
     def pid(self) -> int | None:
