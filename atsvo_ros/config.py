@@ -297,6 +297,10 @@ class TrackerConfig:
         "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. Centred on the "
         "constant-velocity prediction even with a gyro, so a node's poses do not depend on when its IMU arrives; "
         "0 = no prior")
+    imu_translation: bool = _f(True, doc="with an IMU, the camera centre's prediction (the first guess, the motion "
+                               "prior's centre and the constant-velocity check's) integrates the accelerometer from "
+                               "the last trusted velocity instead of assuming constant velocity; gravity is "
+                               "estimated while tracking. A push-off's 4 g is what constant velocity misses")
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from atsvo_ros.core._imu_kernels import _preintegrate
 from atsvo_ros.core.geometry import project_to_so3, so3_exp
 from atsvo_ros.errors import ImuError
 
@@ -126,7 +127,6 @@ def integrate_gyro(batch: ImuBatch, t0_ns: int, t1_ns: int, bias_rad_s: np.ndarr
     return project_to_so3(_chain_product(so3_exp(phi)))
 
 
-__all__ = ["ImuBatch", "integrate_gyro", "interpolate_gyro"]
 
 
 def gyro_rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns: int = 30_000_000) -> np.ndarray:
@@ -148,3 +148,48 @@ def gyro_rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns:
     if t1_ns > b:
         R = R @ so3_exp(batch.gyro_rad_s[-1] * ((t1_ns - b) * 1e-9))
     return project_to_so3(R)
+
+
+@dataclass(frozen=True)
+class Preintegration:
+    """What the IMU measured from ``t0`` to ``t1``, in the IMU frame at ``t0`` and without gravity.
+
+    With ``R_w_i0`` the IMU's orientation at ``t0``, its velocity and position at ``t1`` are
+    ``v1 = v0 + g_w dt + R_w_i0 dv_m_s`` and ``p1 = p0 + v0 dt + g_w dt^2 / 2 + R_w_i0 dp_m``.
+    """
+
+    dt_s: float
+    R_i0_i1: np.ndarray
+    dv_m_s: np.ndarray
+    dp_m: np.ndarray
+
+
+def preintegrate(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns: int = 30_000_000) -> Preintegration:
+    """Integrate gyro and accelerometer from ``t0_ns`` to ``t1_ns`` (``t1 >= t0``).
+
+    Rates and specific forces are linear between samples and held for up to ``max_extrapolation_ns``
+    beyond the first or last sample (a frame's IMU cut ends at its exposure time). Raises
+    :class:`ImuError` when the samples miss the interval by more.
+    """
+    t0_ns, t1_ns = int(t0_ns), int(t1_ns)
+    if t1_ns < t0_ns:
+        raise ImuError(f"preintegration runs forward in time, not from {t0_ns} to {t1_ns} ns")
+    if len(batch) == 0:
+        raise ImuError("no IMU samples to integrate")
+    if batch.t_first_ns - t0_ns > max_extrapolation_ns or t1_ns - batch.t_last_ns > max_extrapolation_ns:
+        raise ImuError(f"IMU samples span [{batch.t_first_ns}, {batch.t_last_ns}] ns, which does not cover "
+                       f"[{t0_ns}, {t1_ns}] ns")
+    i0, i1 = np.searchsorted(batch.stamps_ns, [t0_ns, t1_ns], side="right")
+    inner = batch.stamps_ns[i0:i1]
+    inner = inner[inner < t1_ns]
+    edges = np.concatenate([[t0_ns], inner, [t1_ns]]).astype(np.int64)
+    x = (batch.stamps_ns - t0_ns).astype(np.float64)
+    xq = (edges - t0_ns).astype(np.float64)
+    gyro = np.stack([np.interp(xq, x, batch.gyro_rad_s[:, k]) for k in range(3)], axis=-1)
+    accel = np.stack([np.interp(xq, x, batch.accel_m_s2[:, k]) for k in range(3)], axis=-1)
+    out = _preintegrate(np.ascontiguousarray(xq * 1e-9), np.ascontiguousarray(gyro), np.ascontiguousarray(accel))
+    return Preintegration((t1_ns - t0_ns) * 1e-9, project_to_so3(out[:9].reshape(3, 3)), out[9:12].copy(),
+                          out[12:].copy())
+
+
+__all__ = ["ImuBatch", "Preintegration", "gyro_rotation", "integrate_gyro", "interpolate_gyro", "preintegrate"]

@@ -40,6 +40,12 @@ class GyroBuffer:
         while self._batches and self._batches[0].t_last_ns < newest - self.BUFFER_NS:
             self._batches.popleft()
 
+    def samples(self) -> ImuBatch:
+        """The buffered samples as one batch (joined once per add: several queries per frame read it)."""
+        if self._joined is None:
+            self._joined = ImuBatch.concatenate(list(self._batches))
+        return self._joined
+
     def rotation(self, t0_ns: int, t1_ns: int) -> np.ndarray | None:
         """``R_i0_i1``: the IMU's rotation from ``t0_ns`` to ``t1_ns``.
 
@@ -48,10 +54,8 @@ class GyroBuffer:
         """
         if not self._batches:
             return None
-        if self._joined is None:
-            self._joined = ImuBatch.concatenate(list(self._batches))
         try:
-            return gyro_rotation(self._joined, t0_ns, t1_ns)
+            return gyro_rotation(self.samples(), t0_ns, t1_ns)
         except ImuError:
             return None
 

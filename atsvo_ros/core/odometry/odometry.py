@@ -44,6 +44,7 @@ from atsvo_ros.core.odometry.event_side import EventSide
 from atsvo_ros.core.odometry.feature_assist import FeatureAssist, rotation_between_deg
 from atsvo_ros.core.odometry.gyro import GyroBuffer
 from atsvo_ros.core.odometry.output import ResultBuilder
+from atsvo_ros.core.odometry.inertial import InertialPredictor
 from atsvo_ros.core.odometry.prediction import Predictor
 from atsvo_ros.core.odometry.timing import FrameTiming
 from atsvo_ros.core.rolling_shutter import RollingShutter
@@ -98,7 +99,9 @@ class Odometry:
         self.event_side = EventSide(config, self.events, self.mapping)
         #: The IMU samples of the last seconds (the gyro's rotation between frames).
         self.gyro = GyroBuffer(self.R_rgb_imu)
-        self.predictor = Predictor(config, self.motion, self.gyro, self.camera.height)
+        #: The accelerometer's camera centres and the gravity estimate (``tracker.imu_translation``).
+        self.inertial = InertialPredictor(config.rig.T_rgb_imu_matrix()) if config.tracker.imu_translation else None
+        self.predictor = Predictor(config, self.motion, self.gyro, self.camera.height, self.inertial)
         self.timing = FrameTiming(config.rgb_camera.time_offset_s, config.rgb_camera.frame_clock_frames)
         #: ORB matches to the last trusted frame, for frames whose direct pose is in doubt
         self.features = FeatureAssist(config, self.cameras)
@@ -156,17 +159,20 @@ class Odometry:
         note = self.timing.check(stamp, self.MAX_GAP_S)
         if note is not None:
             self.motion.reset()
+            if self.inertial is not None:
+                self.inertial.reset()
         predicted = self.motion.predict(stamp)
         ev_frame = self.event_side.render(stamp, n_events)  # None while the event camera is silent
         if not self.tracking.has_map:
             self.event_side.end_frame(n_events)
             return self._initialise(prepared, stamp, predicted, t0, note, ev_frame)
-        gyro = self.predictor.gyro_pose(stamp)
+        imu_centre = self.predictor.imu_centre(stamp)
+        gyro = self.predictor.gyro_pose(stamp, imu_centre)
         fast = self.predictor.is_fast()
         guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())
         last = self.motion.last[1] if self.motion.last else predicted
         rs = self.predictor.rolling_shutter(stamp)
-        priors = self.predictor.priors(stamp, gyro)
+        priors = self.predictor.priors(stamp, gyro, imu_centre)
         # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
         self.tracking.set_event_map(self.event_side.event_map() if fast else None)
         fused = self.tracking.uses_events(ev_frame)
@@ -232,11 +238,17 @@ class Odometry:
             kf = self._insert(self.tracking.keyframe_request(prepared, out, rs, geometry_only=True))
             self._blurred_keyframe = kf or self._blurred_keyframe
         self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
+        self._observe_inertial(stamp, out.T_c_w, trusted=status is TrackingStatus.OK)
         self.features.end_frame(prepared, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED)
         if ev_frame is not None:
             self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
         self.event_side.end_frame(n_events)
         return self._result(stamp, out.T_c_w, out, status, t_track, kf, fused)
+
+    def _observe_inertial(self, stamp: int, T_c_w: np.ndarray, trusted: bool) -> None:
+        """Hand a frame's pose to the gravity estimate (``ok`` frames only: a coasting pose is a prediction)."""
+        if self.inertial is not None and self.gyro:
+            self.inertial.observe(self.gyro.samples(), stamp, T_c_w, trusted)
 
     def _depth_at_colour_time(self, prepared: PreparedFrame, stamp: int) -> PreparedFrame:
         """Turn a depth image exposed ``rig.depth_time_offset_s`` off the colour to the colour's time.
@@ -372,6 +384,7 @@ class Odometry:
             status = TrackingStatus.INITIALISING if first else TrackingStatus.LOST
             self.last_loss_reason = why_not
         self.motion.push(stamp, T_c_w, trusted=first)  # the first pose defines odom; a later one is a guess
+        self._observe_inertial(stamp, T_c_w, trusted=first)
         if ok:  # the map's own frame: later frames' matches start from it
             self.features.end_frame(prepared, T_c_w, trusted=True)
         if ev_frame is not None:
@@ -392,6 +405,8 @@ class Odometry:
             self._affine = (0.0, 0.0)
             self._blurred_keyframe = self.predictor.is_fast()  # a new map from mid-turn: replace it once the turn slows
             self.motion.reset()
+            if self.inertial is not None:
+                self.inertial.reset()
         else:
             reason = f"{reason}; {why_not}" if reason else why_not
         self.motion.push(stamp, predicted, trusted=False)

@@ -5,6 +5,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.odometry.gyro import GyroBuffer
+from atsvo_ros.core.odometry.inertial import InertialPredictor
 from atsvo_ros.core.rolling_shutter import RollingShutter
 from atsvo_ros.core.tracking.checks import Priors
 from atsvo_ros.core.tracking.motion import MotionModel
@@ -19,23 +20,38 @@ class Predictor:
         motion: the odometry's motion model (read, never changed here).
         gyro: the odometry's IMU buffer.
         image_height: rows of the colour image (its rolling shutter's rows).
+        inertial: the accelerometer's centre prediction (``tracker.imu_translation``), or None.
     """
 
-    def __init__(self, config: AtsvoConfig, motion: MotionModel, gyro: GyroBuffer, image_height: int) -> None:
+    def __init__(self, config: AtsvoConfig, motion: MotionModel, gyro: GyroBuffer, image_height: int,
+                 inertial: InertialPredictor | None = None) -> None:
         self.config = config
         self.motion = motion
         self.gyro = gyro
         self.image_height = image_height
+        self.inertial = inertial
 
-    def gyro_pose(self, stamp: int) -> np.ndarray | None:
-        """``T_c_w`` with the rotation since the last frame from the gyro, or None when the IMU does not cover it."""
+    def imu_centre(self, stamp: int) -> np.ndarray | None:
+        """The camera centre at ``stamp`` from the accelerometer, after two trusted frames (else None)."""
+        if self.inertial is None or not self.gyro or not self.motion.velocity_trusted:
+            return None
+        return self.inertial.centre(self.gyro.samples(), self.motion.history, stamp)
+
+    def gyro_pose(self, stamp: int, centre: np.ndarray | None = None) -> np.ndarray | None:
+        """``T_c_w`` with the rotation since the last frame from the gyro, or None when the IMU does not cover it.
+
+        The camera centre is ``centre`` when given (the accelerometer's), else constant velocity's.
+        """
         last = self.motion.last
         if last is None:
             return None
         R_c0_c1 = self.gyro.camera_rotation(last[0], stamp)
         if R_c0_c1 is None:
             return None
-        return self.motion.predict_with_rotation(stamp, R_c0_c1.T)
+        T = self.motion.predict_with_rotation(stamp, R_c0_c1.T)
+        if centre is not None:
+            T[:3, 3] = -T[:3, :3] @ centre
+        return T
 
     def guesses(self, stamp: int, predicted: np.ndarray, gyro: np.ndarray | None, fast: bool,
                 event_rate_ratio: float | None) -> list[np.ndarray]:
@@ -53,22 +69,26 @@ class Predictor:
             scales += [0.75 * event_rate_ratio, event_rate_ratio, 1.25 * event_rate_ratio]
         return guesses + [self.motion.predict_scaled(stamp, k) for k in scales]
 
-    def priors(self, stamp: int, gyro: np.ndarray | None) -> Priors:
+    def priors(self, stamp: int, gyro: np.ndarray | None, centre: np.ndarray | None = None) -> Priors:
         """What the motion says this frame's pose should be: the gyro's prediction and, after two trusted frames,
-        the constant-velocity camera centre with the reach of ``tracker.max_acceleration_m_s2``."""
+        the camera centre (``centre``, the accelerometer's, else constant velocity's) with the reach of
+        ``tracker.max_acceleration_m_s2``."""
         cfg = self.config.tracker
-        centre = self.motion.centre_prior(stamp, cfg.max_acceleration_m_s2, cfg.motion_noise_m)
+        check = self.motion.centre_prior(stamp, cfg.max_acceleration_m_s2, cfg.motion_noise_m)
         prior = None
         a_m, a_rad = cfg.motion_prior_acceleration_m_s2, cfg.motion_prior_angular_acceleration_rad_s2
         spread = self.motion.prediction_spread(stamp) if a_m > 0 and a_rad > 0 else None
         if spread is not None:  # the last two poses are trusted
-            # Centred on constant velocity even with a gyro (which stays a guess and a check): a node that releases
-            # a frame before its IMU arrives would otherwise track it against another prior than the replay (1.5 mm
-            # apart in CI).
-            prior = MotionPrior(self.motion.predict(stamp), a_m * spread, a_rad * spread, cfg.motion_prior_huber)
-        if centre is None:
+            # The rotation stays constant velocity's even with a gyro (the gyro is a guess and a check); the centre
+            # is the accelerometer's when it has one. Node and replay give the core the same IMU samples (each
+            # frame's cut ends at its exposure), so both track against the same prior.
+            T_prior = self.motion.predict(stamp)
+            if centre is not None:
+                T_prior[:3, 3] = -T_prior[:3, :3] @ centre
+            prior = MotionPrior(T_prior, a_m * spread, a_rad * spread, cfg.motion_prior_huber)
+        if check is None:
             return Priors(gyro, motion=prior)
-        return Priors(gyro, *centre, motion=prior)
+        return Priors(gyro, check[0] if centre is None else centre, check[1], motion=prior)
 
     def rolling_shutter(self, stamp: int) -> RollingShutter | None:
         """Row timing of the colour (and depth) image when the camera has a rolling shutter."""
