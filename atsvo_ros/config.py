@@ -294,13 +294,22 @@ class TrackerConfig:
     motion_prior_angular_acceleration_rad_s2: float = _f(
         32.0, 0.0, 1e5, doc="typical angular acceleration for the motion prior's rotation sigma (same formula: "
         "2 deg at 30 fps). In flight the body keeps its angular momentum (simulated backflips: the constant-rate "
-        "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. Centred on the "
-        "constant-velocity prediction even with a gyro, so a node's poses do not depend on when its IMU arrives; "
-        "0 = no prior")
+        "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. The rotation is "
+        "centred on the constant-rate prediction even with a gyro (the gyro is a guess and a check); the centre on "
+        "the accelerometer's prediction with tracker.imu_translation; 0 = no prior")
     imu_translation: bool = _f(True, doc="with an IMU, the camera centre's prediction (the first guess, the motion "
                                "prior's centre and the constant-velocity check's) integrates the accelerometer from "
                                "the last trusted velocity instead of assuming constant velocity; gravity is "
-                               "estimated while tracking. A push-off's 4 g is what constant velocity misses")
+                               "estimated while tracking. A push-off's 4 g is what constant velocity misses. Tuning "
+                               "seeds 0-4 (2.4 s backflip, IMU fed), mean ATE on / off: fused 6.73 / 8.94 cm, RGB-D "
+                               "17.45 / 29.70; bound unchanged (5.25 / 5.27)")
+    depth_time_translation: bool = _f(False, doc="when depth is moved to the colour's time (rig.depth_time_offset_s, "
+                                      "with an IMU), move it by the accelerometer's camera velocity times the offset "
+                                      "as well as by the gyro's rotation (a bound's 2 m/s over 16 ms is 3 cm of "
+                                      "depth). Off: mixed on tuning seeds 0-4 (5 s, 320x240, IMU fed, mean ATE "
+                                      "on / off): bound fused 15.7 / 18.8 cm, RGB-D 15.4 / 18.7, but backflip fused "
+                                      "9.6 / 6.5, RGB-D 31.9 / 21.5. With the true motion instead the 2.5 s bound "
+                                      "seed 0 (RGB-D) goes 9.8 -> 1.5 cm (docs/odometry.md)")
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")
@@ -394,7 +403,7 @@ class NodeConfig:
                              "matches any publisher, a late message is dropped, never waited for; the robot) or "
                              "reliable (reliable, keep all: every message of a reliable publisher arrives, a slow "
                              "node slows the publisher down; replaying a bag where every frame must count)")
-    use_imu: bool = _f(True, doc="feed topics.imu's gyro to the motion prediction")
+    use_imu: bool = _f(True, doc="feed topics.imu (gyro and accelerometer) to the motion prediction")
     imu_max_wait_s: float = _f(0.25, 0.0, 10.0,
                                doc="longest a paired frame waits for the IMU sample after it: an IMU this far "
                                    "behind in stamp time (and, in the node, silent this long in wall time: a "

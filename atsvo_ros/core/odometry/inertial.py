@@ -16,6 +16,7 @@ under 0.5 mm.
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,6 +32,14 @@ GRAVITY_SPAN_NS = 400_000_000
 GRAVITY_ESTIMATES = 30
 #: an estimate whose magnitude is further than this from standard gravity is dropped (a wrong pose among the three)
 GRAVITY_TOLERANCE_M_S2 = 1.5
+
+
+@dataclass(frozen=True)
+class CameraMotion:
+    """The colour camera's centre (m) and velocity (m/s) in the tracking world at one stamp."""
+
+    centre_w: np.ndarray
+    velocity_w: np.ndarray
 
 
 class InertialPredictor:
@@ -79,8 +88,9 @@ class InertialPredictor:
             self._estimates.append(g)
             self._last_estimate_ns = stamp_ns
 
-    def centre(self, imu: ImuBatch, history: tuple[tuple[int, np.ndarray], ...], stamp_ns: int) -> np.ndarray | None:
-        """The colour camera's centre in the world at ``stamp_ns``, or None.
+    def predict(self, imu: ImuBatch, history: tuple[tuple[int, np.ndarray], ...],
+                stamp_ns: int) -> CameraMotion | None:
+        """The colour camera's centre and velocity in the world at ``stamp_ns``, or None.
 
         Args:
             imu: the buffered IMU samples.
@@ -108,9 +118,18 @@ class InertialPredictor:
         v1 = v0 + g_w * dt01 + T_w_i0[:3, :3] @ pre01.dv_m_s
         R_w_i1 = T_w_i1[:3, :3]
         p2 = T_w_i1[:3, 3] + v1 * dt12 + 0.5 * g_w * dt12 * dt12 + R_w_i1 @ pre12.dp_m
+        v2 = v1 + g_w * dt12 + R_w_i1 @ pre12.dv_m_s
         R_w_i2 = R_w_i1 @ pre12.R_i0_i1
         t_imu_c = se3_inv(self.T_c_imu)[:3, 3]
-        return p2 + R_w_i2 @ t_imu_c
+        # the camera sits a lever arm off the IMU: it moves with the body's turn as well (w x r)
+        w_i2 = _last_rate(imu, int(stamp_ns))
+        return CameraMotion(p2 + R_w_i2 @ t_imu_c, v2 + R_w_i2 @ np.cross(w_i2, t_imu_c))
+
+
+def _last_rate(imu: ImuBatch, stamp_ns: int) -> np.ndarray:
+    """The gyro's rate at ``stamp_ns`` (the nearest sample not after it, else the first)."""
+    k = int(np.searchsorted(imu.stamps_ns, stamp_ns, side="right")) - 1
+    return imu.gyro_rad_s[max(k, 0)]
 
 
 def _gravity_from_three(imu: ImuBatch, a: tuple[int, np.ndarray], b: tuple[int, np.ndarray],
@@ -132,4 +151,4 @@ def _gravity_from_three(imu: ImuBatch, a: tuple[int, np.ndarray], b: tuple[int, 
     return 2.0 * (A - B - Ta[:3, :3] @ ab.dv_m_s) / (ab.dt_s + bc.dt_s)
 
 
-__all__ = ["InertialPredictor", "STANDARD_GRAVITY"]
+__all__ = ["CameraMotion", "InertialPredictor", "STANDARD_GRAVITY"]

@@ -5,8 +5,9 @@ prediction extrapolates the last inter-frame motion to the new stamp (scaled by 
 a dropped frame is bridged); the zero-motion prediction repeats the last pose. With a gyro, the
 rotation between the last frame and the new one comes from integrating the IMU's angular velocity
 (no bias is estimated: a turn-on bias of ~1 deg/s adds ~0.03 deg per frame), which is accurate to
-a small fraction of a degree over one frame even at the rates of a backflip;
-the translation still comes from constant motion.
+a small fraction of a degree over one frame even at the rates of a backflip.
+The translation comes from constant motion here; the odometry replaces the centre with the
+accelerometer's when it has one (:mod:`atsvo_ros.core.odometry.inertial`).
 
 :meth:`MotionModel.relative_motion` gives the paper's relative-motion factor of ``T_{i-2}, T_{i-1}``
 as angular and linear velocity (rad/s, m/s), independent of the frame rate.

@@ -54,16 +54,21 @@ def test_gravity_is_estimated_from_trusted_poses_and_predicts_the_push_off():
             assert pred.gravity_w is None  # needs two spans of trusted poses
     assert np.linalg.norm(pred.gravity_w - G_W) < 0.05
     # through the push-off (no pose trusted any more, as when the camera blurs), one frame ahead from two exact poses
-    worst_imu = worst_cv = 0.0
+    worst_imu = worst_cv = worst_v = 0.0
     for k in range(36, 46):
         hist = ((stamps[k - 2], _T_c_w(stamps[k - 2] * 1e-9, T_c_imu)), (stamps[k - 1], _T_c_w(stamps[k - 1] * 1e-9,
                                                                                                T_c_imu)))
         truth = se3_inv(_T_c_w(stamps[k] * 1e-9, T_c_imu))[:3, 3]
-        centre = pred.centre(imu, hist, stamps[k])
+        motion = pred.predict(imu, hist, stamps[k])
         c0, c1 = (se3_inv(T)[:3, 3] for _, T in hist)
-        worst_imu = max(worst_imu, float(np.linalg.norm(centre - truth)))
+        worst_imu = max(worst_imu, float(np.linalg.norm(motion.centre_w - truth)))
+        # the camera's velocity, lever arm included (1e-4 s central difference of the true centre)
+        v_true = (se3_inv(_T_c_w(stamps[k] * 1e-9 + 1e-4, T_c_imu))[:3, 3]
+                  - se3_inv(_T_c_w(stamps[k] * 1e-9 - 1e-4, T_c_imu))[:3, 3]) / 2e-4
+        worst_v = max(worst_v, float(np.linalg.norm(motion.velocity_w - v_true)))
         worst_cv = max(worst_cv, float(np.linalg.norm(2 * c1 - c0 - truth)))
     assert worst_imu < 1e-3 and worst_cv > 2e-2, (worst_imu, worst_cv)  # measured: 0.12 mm against 3.3 cm
+    assert worst_v < 0.05, worst_v
 
 
 def test_no_centre_without_gravity_or_imu_cover_and_untrusted_poses_are_ignored():
@@ -71,13 +76,13 @@ def test_no_centre_without_gravity_or_imu_cover_and_untrusted_poses_are_ignored(
     imu = _imu(T_c_imu, span_s=1.0)
     pred = InertialPredictor(T_c_imu)
     hist = ((0, _T_c_w(0.0, T_c_imu)), (33 * MS, _T_c_w(0.033, T_c_imu)))
-    assert pred.centre(imu, hist, 66 * MS) is None  # no gravity yet
+    assert pred.predict(imu, hist, 66 * MS) is None  # no gravity yet
     for k in range(30):
         pred.observe(imu, k * 33 * MS, _T_c_w(k * 0.033, T_c_imu), trusted=False)
     assert pred.gravity_w is None
     for k in range(30):
         pred.observe(imu, k * 33 * MS, _T_c_w(k * 0.033, T_c_imu), trusted=True)
-    assert pred.gravity_w is not None and pred.centre(imu, hist, 66 * MS) is not None
-    assert pred.centre(imu, hist, 1100 * MS) is None  # 100 ms past the last sample
+    assert pred.gravity_w is not None and pred.predict(imu, hist, 66 * MS) is not None
+    assert pred.predict(imu, hist, 1100 * MS) is None  # 100 ms past the last sample
     pred.reset()
     assert pred.gravity_w is not None  # the world's axes stay

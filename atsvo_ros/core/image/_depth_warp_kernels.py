@@ -1,0 +1,60 @@
+"""numba kernel of the depth warp; private, see :mod:`atsvo_ros.core.image.depth_warp`.
+
+Explicit signature: compiled (or loaded from numba's cache) at import, never per frame.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit("float32[:, ::1](float32[:, ::1], float64, float64, float64, float64, float64[:, ::1], float64[::1])",
+      cache=True, nogil=True)
+def _warp_depth(depth, fx, fy, cx, cy, R, t):  # pragma: no cover - compiled
+    """Each target pixel's depth after the camera moved by ``X -> R X + t`` (nearest source pixel, 0 = none).
+
+    The rotation maps rays whatever their depth (a homography); with a translation, the target point
+    (rotated depth plus ``t_z``) is moved back by ``t`` and looked up once more.
+    """
+    h, w = depth.shape
+    out = np.zeros((h, w), np.float32)
+    moved = t[0] != 0.0 or t[1] != 0.0 or t[2] != 0.0
+    for v in range(h):
+        ry = (v - cy) / fy
+        for u in range(w):
+            rx = (u - cx) / fx
+            # the source ray of this target pixel under the rotation alone: R^T [rx, ry, 1]
+            sx = R[0, 0] * rx + R[1, 0] * ry + R[2, 0]
+            sy = R[0, 1] * rx + R[1, 1] * ry + R[2, 1]
+            sz = R[0, 2] * rx + R[1, 2] * ry + R[2, 2]
+            if sz <= 1e-9:
+                continue
+            us, vs = fx * sx / sz + cx, fy * sy / sz + cy
+            iu, iv = int(np.floor(us + 0.5)), int(np.floor(vs + 0.5))
+            if iu < 0 or iu >= w or iv < 0 or iv >= h:
+                continue
+            d = depth[iv, iu]
+            if not d > 0.0:
+                continue
+            rsx, rsy = (us - cx) / fx, (vs - cy) / fy
+            z = d * (R[2, 0] * rsx + R[2, 1] * rsy + R[2, 2])
+            if moved:
+                zt = z + t[2]
+                px, py, pz = zt * rx - t[0], zt * ry - t[1], zt - t[2]
+                qx = R[0, 0] * px + R[1, 0] * py + R[2, 0] * pz
+                qy = R[0, 1] * px + R[1, 1] * py + R[2, 1] * pz
+                qz = R[0, 2] * px + R[1, 2] * py + R[2, 2] * pz
+                if qz <= 1e-6:
+                    continue
+                us, vs = fx * qx / qz + cx, fy * qy / qz + cy
+                iu, iv = int(np.floor(us + 0.5)), int(np.floor(vs + 0.5))
+                if iu < 0 or iu >= w or iv < 0 or iv >= h:
+                    continue
+                d = depth[iv, iu]
+                if not d > 0.0:
+                    continue
+                rsx, rsy = (us - cx) / fx, (vs - cy) / fy
+                z = d * (R[2, 0] * rsx + R[2, 1] * rsy + R[2, 2]) + t[2]
+            if z > 0.0:
+                out[v, u] = z
+    return out
