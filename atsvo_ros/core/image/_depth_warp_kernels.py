@@ -8,6 +8,24 @@ import numpy as np
 from numba import njit
 
 
+@njit("float64(float32[:, ::1], float64, float64, float64, float64, float64[:, ::1], float64, float64, float64)",
+      cache=True, nogil=True)
+def _rotated_z(depth, fx, fy, cx, cy, R, x, y, z):  # pragma: no cover - compiled
+    """z in the target frame of the source pixel nearest the ray ``(x, y, z)`` (source frame), rotated by ``R``;
+    0 when the ray leaves the image or the pixel has no depth."""
+    h, w = depth.shape
+    if z <= 1e-9:
+        return 0.0
+    us, vs = fx * x / z + cx, fy * y / z + cy
+    iu, iv = int(np.floor(us + 0.5)), int(np.floor(vs + 0.5))
+    if iu < 0 or iu >= w or iv < 0 or iv >= h:
+        return 0.0
+    d = depth[iv, iu]
+    if not d > 0.0:
+        return 0.0
+    return d * (R[2, 0] * (us - cx) / fx + R[2, 1] * (vs - cy) / fy + R[2, 2])
+
+
 @njit("float32[:, ::1](float32[:, ::1], float64, float64, float64, float64, float64[:, ::1], float64[::1])",
       cache=True, nogil=True)
 def _warp_depth(depth, fx, fy, cx, cy, R, t):  # pragma: no cover - compiled
@@ -24,37 +42,14 @@ def _warp_depth(depth, fx, fy, cx, cy, R, t):  # pragma: no cover - compiled
         for u in range(w):
             rx = (u - cx) / fx
             # the source ray of this target pixel under the rotation alone: R^T [rx, ry, 1]
-            sx = R[0, 0] * rx + R[1, 0] * ry + R[2, 0]
-            sy = R[0, 1] * rx + R[1, 1] * ry + R[2, 1]
-            sz = R[0, 2] * rx + R[1, 2] * ry + R[2, 2]
-            if sz <= 1e-9:
-                continue
-            us, vs = fx * sx / sz + cx, fy * sy / sz + cy
-            iu, iv = int(np.floor(us + 0.5)), int(np.floor(vs + 0.5))
-            if iu < 0 or iu >= w or iv < 0 or iv >= h:
-                continue
-            d = depth[iv, iu]
-            if not d > 0.0:
-                continue
-            rsx, rsy = (us - cx) / fx, (vs - cy) / fy
-            z = d * (R[2, 0] * rsx + R[2, 1] * rsy + R[2, 2])
-            if moved:
+            z = _rotated_z(depth, fx, fy, cx, cy, R, R[0, 0] * rx + R[1, 0] * ry + R[2, 0],
+                           R[0, 1] * rx + R[1, 1] * ry + R[2, 1], R[0, 2] * rx + R[1, 2] * ry + R[2, 2])
+            if moved and z > 0.0:
                 zt = z + t[2]
-                px, py, pz = zt * rx - t[0], zt * ry - t[1], zt - t[2]
-                qx = R[0, 0] * px + R[1, 0] * py + R[2, 0] * pz
-                qy = R[0, 1] * px + R[1, 1] * py + R[2, 1] * pz
-                qz = R[0, 2] * px + R[1, 2] * py + R[2, 2] * pz
-                if qz <= 1e-6:
-                    continue
-                us, vs = fx * qx / qz + cx, fy * qy / qz + cy
-                iu, iv = int(np.floor(us + 0.5)), int(np.floor(vs + 0.5))
-                if iu < 0 or iu >= w or iv < 0 or iv >= h:
-                    continue
-                d = depth[iv, iu]
-                if not d > 0.0:
-                    continue
-                rsx, rsy = (us - cx) / fx, (vs - cy) / fy
-                z = d * (R[2, 0] * rsx + R[2, 1] * rsy + R[2, 2]) + t[2]
+                px, py, pz = zt * rx - t[0], zt * ry - t[1], zt - t[2]  # X_s = R^T (X_t - t)
+                z = _rotated_z(depth, fx, fy, cx, cy, R, R[0, 0] * px + R[1, 0] * py + R[2, 0] * pz,
+                               R[0, 1] * px + R[1, 1] * py + R[2, 1] * pz, R[0, 2] * px + R[1, 2] * py + R[2, 2] * pz)
+                z = z + t[2] if z > 0.0 else 0.0
             if z > 0.0:
                 out[v, u] = z
     return out
