@@ -297,12 +297,13 @@ class TrackerConfig:
         "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. The rotation is "
         "centred on the constant-rate prediction even with a gyro (the gyro is a guess and a check); the centre on "
         "the accelerometer's prediction with tracker.imu_translation; 0 = no prior")
-    imu_translation: bool = _f(True, doc="with an IMU, the camera centre's prediction (the first guess, the motion "
+    imu_translation: bool = _f(False, doc="with an IMU, the camera centre's prediction (the first guess, the motion "
                                "prior's centre and the constant-velocity check's) integrates the accelerometer from "
                                "the last trusted velocity instead of assuming constant velocity; gravity is "
-                               "estimated while tracking. A push-off's 4 g is what constant velocity misses. Tuning "
-                               "seeds 0-4 (2.4 s backflip, IMU fed), mean ATE on / off: fused 6.73 / 8.94 cm, RGB-D "
-                               "17.45 / 29.70; bound unchanged (5.25 / 5.27)")
+                               "estimated while tracking. A push-off's 4 g is what constant velocity misses. Off: "
+                               "tuning seeds 0-4 (2.4 s backflip, IMU fed, mean ATE on / off) gained (fused 6.73 / "
+                               "8.94 cm, RGB-D 17.45 / 29.70), held-out seeds 100-102 (10 s) did not (fused "
+                               "backflip 6.91 / 5.72, bound 13.24 / 13.59, trot 1.44 / 1.34; docs/odometry.md)")
     depth_time_translation: bool = _f(False, doc="when depth is moved to the colour's time (rig.depth_time_offset_s, "
                                       "with an IMU), move it by the accelerometer's camera velocity times the offset "
                                       "as well as by the gyro's rotation (a bound's 2 m/s over 16 ms is 3 cm of "
