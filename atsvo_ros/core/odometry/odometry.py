@@ -43,8 +43,8 @@ from atsvo_ros.core.mapping.ports import InlineMapping, MappingPort
 from atsvo_ros.core.odometry.event_side import EventSide
 from atsvo_ros.core.odometry.feature_assist import FeatureAssist, rotation_between_deg
 from atsvo_ros.core.odometry.gyro import GyroBuffer
-from atsvo_ros.core.odometry.output import ResultBuilder
 from atsvo_ros.core.odometry.inertial import CameraMotion, InertialPredictor
+from atsvo_ros.core.odometry.output import ResultBuilder
 from atsvo_ros.core.odometry.prediction import Predictor
 from atsvo_ros.core.odometry.timing import FrameTiming
 from atsvo_ros.core.rolling_shutter import RollingShutter
@@ -99,8 +99,10 @@ class Odometry:
         self.event_side = EventSide(config, self.events, self.mapping)
         #: The IMU samples of the last seconds (the gyro's rotation between frames).
         self.gyro = GyroBuffer(self.R_rgb_imu)
-        #: The accelerometer's camera centres and the gravity estimate (``tracker.imu_translation``).
-        self.inertial = InertialPredictor(config.rig.T_rgb_imu_matrix()) if config.tracker.imu_translation else None
+        #: The accelerometer's camera centres and velocities and the gravity estimate they need
+        #: (``tracker.imu_translation``, ``tracker.depth_time_translation``).
+        uses_accel = config.tracker.imu_translation or config.tracker.depth_time_translation
+        self.inertial = InertialPredictor(config.rig.T_rgb_imu_matrix()) if uses_accel else None
         self.predictor = Predictor(config, self.motion, self.gyro, self.camera.height, self.inertial)
         self.timing = FrameTiming(config.rgb_camera.time_offset_s, config.rgb_camera.frame_clock_frames)
         #: ORB matches to the last trusted frame, for frames whose direct pose is in doubt
@@ -168,7 +170,7 @@ class Odometry:
         if not self.tracking.has_map:
             self.event_side.end_frame(n_events)
             return self._initialise(prepared, stamp, predicted, t0, note, ev_frame)
-        imu_centre = None if imu is None else imu.centre_w
+        imu_centre = imu.centre_w if imu is not None and self.config.tracker.imu_translation else None
         gyro = self.predictor.gyro_pose(stamp, imu_centre)
         fast = self.predictor.is_fast()
         guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())

@@ -20,7 +20,7 @@ class Predictor:
         motion: the odometry's motion model (read, never changed here).
         gyro: the odometry's IMU buffer.
         image_height: rows of the colour image (its rolling shutter's rows).
-        inertial: the accelerometer's centre prediction (``tracker.imu_translation``), or None.
+        inertial: the accelerometer's prediction of the camera's centre and velocity, or None.
     """
 
     def __init__(self, config: AtsvoConfig, motion: MotionModel, gyro: GyroBuffer, image_height: int,
