@@ -304,13 +304,18 @@ class TrackerConfig:
                                "tuning seeds 0-4 (2.4 s backflip, IMU fed, mean ATE on / off) gained (fused 6.73 / "
                                "8.94 cm, RGB-D 17.45 / 29.70), held-out seeds 100-102 (10 s) did not (fused "
                                "backflip 6.91 / 5.72, bound 13.24 / 13.59, trot 1.44 / 1.34; docs/odometry.md)")
-    depth_time_translation: bool = _f(False, doc="when depth is moved to the colour's time (rig.depth_time_offset_s, "
-                                      "with an IMU), move it by the accelerometer's camera velocity times the offset "
-                                      "as well as by the gyro's rotation (a bound's 2 m/s over 16 ms is 3 cm of "
-                                      "depth). Off: mixed on tuning seeds 0-4 (5 s, 320x240, IMU fed, mean ATE "
-                                      "on / off): bound fused 15.7 / 18.8 cm, RGB-D 15.4 / 18.7, but backflip fused "
-                                      "9.6 / 6.5, RGB-D 31.9 / 21.5. With the true motion instead the 2.5 s bound "
-                                      "seed 0 (RGB-D) goes 9.8 -> 1.5 cm (docs/odometry.md)")
+    depth_time_translation: bool = _f(True, doc="when depth is moved to the colour's time (rig.depth_time_offset_s, "
+                                      "with an IMU), move it by the camera's translation over the offset as well as "
+                                      "by the gyro's rotation (a bound's 2 m/s over 16 ms is 3 cm of depth): the "
+                                      "IMU's velocity fitted over the trusted poses of "
+                                      "tracker.depth_velocity_window_s, and the map rebuilt from its first frame "
+                                      "once that velocity exists. Tuning seeds 0-4 (2.4-2.5 s, 320x240, IMU fed, "
+                                      "mean ATE on / off): bound RGB-D 3.97 / 6.20 cm, fused 4.80 / 5.61; backflip "
+                                      "fused 8.12 / 8.39 (docs/odometry.md)")
+    depth_velocity_window_s: float = _f(0.15, 0.03, 2.0, doc="span of the trusted poses the IMU's velocity is fitted "
+                                        "to for tracker.depth_time_translation (at least 3): longer averages more pose "
+                                        "noise, shorter lets less of the accelerometer's bias in (the BMI055's 70 mg "
+                                        "over 0.15 s: under 1 mm of depth)")
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,10 +41,11 @@ from atsvo_ros.core.image.frontend import PreparedFrame, RgbdFrontEnd
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
 from atsvo_ros.core.mapping.ports import InlineMapping, MappingPort
+from atsvo_ros.core.odometry.depth_timing import DepthTiming
 from atsvo_ros.core.odometry.event_side import EventSide
 from atsvo_ros.core.odometry.feature_assist import FeatureAssist, rotation_between_deg
 from atsvo_ros.core.odometry.gyro import GyroBuffer
-from atsvo_ros.core.odometry.inertial import CameraMotion, InertialPredictor
+from atsvo_ros.core.odometry.inertial import STANDARD_GRAVITY, InertialPredictor
 from atsvo_ros.core.odometry.output import ResultBuilder
 from atsvo_ros.core.odometry.prediction import Predictor
 from atsvo_ros.core.odometry.timing import FrameTiming
@@ -51,6 +53,15 @@ from atsvo_ros.core.rolling_shutter import RollingShutter
 from atsvo_ros.core.tracking.checks import DEGRADED, OK, Priors, Verdict
 from atsvo_ros.core.tracking.motion import MotionModel
 from atsvo_ros.core.tracking.tracking import Tracking, TrackingOutcome, rotation_hypotheses
+
+
+@dataclass(frozen=True)
+class _Anchor:
+    """The frame a map was started from, its depth as it came: rebuilt once that depth can be moved in time."""
+
+    stamp_ns: int
+    raw: PreparedFrame
+    T_c_w: np.ndarray
 
 
 def _best_attempt(attempts: list[tuple[TrackingOutcome, bool, TrackingStatus]]
@@ -103,6 +114,13 @@ class Odometry:
         #: (``tracker.imu_translation``, ``tracker.depth_time_translation``).
         uses_accel = config.tracker.imu_translation or config.tracker.depth_time_translation
         self.inertial = InertialPredictor(config.rig.T_rgb_imu_matrix()) if uses_accel else None
+        #: The camera's motion between the colour and the depth exposure (``tracker.depth_time_translation``).
+        self.depth_timing = DepthTiming(config.rig.T_rgb_imu_matrix(),
+                                        int(config.tracker.depth_velocity_window_s * 1e9)) \
+            if config.tracker.depth_time_translation and config.rig.depth_time_offset_s != 0 else None
+        # until the online estimate exists: the base upright at the first frame (REP 103: base z up)
+        self._gravity_prior_w = -STANDARD_GRAVITY * self.T_rgb_base[:3, 2]
+        self._anchor: _Anchor | None = None  # the current map's first frame while its depth is not moved in time
         self.predictor = Predictor(config, self.motion, self.gyro, self.camera.height, self.inertial)
         self.timing = FrameTiming(config.rgb_camera.time_offset_s, config.rgb_camera.frame_clock_frames)
         #: ORB matches to the last trusted frame, for frames whose direct pose is in doubt
@@ -163,14 +181,17 @@ class Odometry:
             self.motion.reset()
             if self.inertial is not None:
                 self.inertial.reset()
+            if self.depth_timing is not None:
+                self.depth_timing.reset()
         predicted = self.motion.predict(stamp)
-        imu = self.predictor.imu_motion(stamp)
-        prepared = self._depth_at_colour_time(prepared, stamp, imu)
+        raw = prepared
+        prepared, moved = self._depth_at_colour_time(raw, stamp)
         ev_frame = self.event_side.render(stamp, n_events)  # None while the event camera is silent
         if not self.tracking.has_map:
             self.event_side.end_frame(n_events)
-            return self._initialise(prepared, stamp, predicted, t0, note, ev_frame)
-        imu_centre = imu.centre_w if imu is not None and self.config.tracker.imu_translation else None
+            return self._initialise(prepared, stamp, predicted, t0, note, ev_frame, raw, moved)
+        imu = self.predictor.imu_motion(stamp) if self.config.tracker.imu_translation else None
+        imu_centre = None if imu is None else imu.centre_w
         gyro = self.predictor.gyro_pose(stamp, imu_centre)
         fast = self.predictor.is_fast()
         guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())
@@ -212,7 +233,7 @@ class Odometry:
             if best is None:
                 self.last_loss_reason = out.verdict.reason
                 self.event_side.end_frame(n_events)
-                return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame)
+                return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame, raw, moved)
             out, fused, status = best
         # without a gyro nothing else vouches for a fast frame's rotation (with one, the gyro check does)
         if status is not TrackingStatus.DEGRADED and gyro is None and self.features.wants_check(out.T_c_w, last):
@@ -243,6 +264,8 @@ class Odometry:
             self._blurred_keyframe = kf or self._blurred_keyframe
         self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
         self._observe_inertial(stamp, out.T_c_w, trusted=status is TrackingStatus.OK)
+        if moved and self._anchor is not None and status is TrackingStatus.OK:
+            kf = self._reanchor(prepared, out.T_c_w) or kf
         self.features.end_frame(prepared, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED)
         if ev_frame is not None:
             self._remember_event(ev_frame, prepared.depth_m, out.T_c_w)
@@ -253,31 +276,60 @@ class Odometry:
         """Hand a frame's pose to the gravity estimate (``ok`` frames only: a coasting pose is a prediction)."""
         if self.inertial is not None and self.gyro:
             self.inertial.observe(self.gyro.samples(), stamp, T_c_w, trusted)
+        if self.depth_timing is not None and trusted:
+            self.depth_timing.observe(stamp, T_c_w)
 
-    def _depth_at_colour_time(self, prepared: PreparedFrame, stamp: int, imu: CameraMotion | None) -> PreparedFrame:
+    def _depth_at_colour_time(self, prepared: PreparedFrame, stamp: int) -> tuple[PreparedFrame, bool]:
         """Move a depth image exposed ``rig.depth_time_offset_s`` off the colour to the colour's time.
 
-        The gyro gives the rotation between the two exposures. Without gyro samples over the interval the
-        depth is left as it is: the constant-motion prediction's rotation made the flips worse (tuning seeds
-        0-4, mean ATE 26 cm against 17), the true rotation better (6.6). With ``tracker.depth_time_translation``
-        the camera's velocity (the accelerometer's, when it has one) times the offset moves it too:
-        a bound's 2 m/s over the D455's up to 16 ms is 3 cm of depth.
+        The gyro gives the rotation between the two exposures; with ``tracker.depth_time_translation`` the
+        translation comes from :class:`~atsvo_ros.core.odometry.depth_timing.DepthTiming` once it has the trusted
+        poses it needs (True is returned then: the depth was moved by both). Without gyro samples over the interval
+        the depth is left as it is: the constant-motion prediction's rotation made the flips worse (tuning seeds
+        0-4, mean ATE 26 cm against 17), the true rotation better (6.6).
         """
         offset_ns = int(round(self.config.rig.depth_time_offset_s * 1e9))
         if offset_ns == 0:
-            return prepared
+            return prepared, False
+        T_c_d = self._depth_motion(stamp, offset_ns)
+        if T_c_d is not None:
+            depth = warp_depth(prepared.depth_m, self.cameras[0], T_c_d[:3, :3], T_c_d[:3, 3])
+            return self.frontend.with_depth(prepared, depth), True
         if offset_ns > 0:
             R_c_d = self.gyro.camera_rotation(stamp, stamp + offset_ns)
         else:
             R_d_c = self.gyro.camera_rotation(stamp + offset_ns, stamp)
             R_c_d = None if R_d_c is None else R_d_c.T
         if R_c_d is None:
-            return prepared
-        velocity = self.predictor.camera_velocity(stamp, imu) if self.config.tracker.depth_time_translation else None
-        if velocity is None:
-            return self.frontend.with_depth(prepared, rotate_depth(prepared.depth_m, self.cameras[0], R_c_d))
-        t_c_d = velocity * (offset_ns * 1e-9)  # where the camera was at the depth's exposure, in the colour frame
-        return self.frontend.with_depth(prepared, warp_depth(prepared.depth_m, self.cameras[0], R_c_d, t_c_d))
+            return prepared, False
+        return self.frontend.with_depth(prepared, rotate_depth(prepared.depth_m, self.cameras[0], R_c_d)), False
+
+    def _depth_motion(self, stamp: int, offset_ns: int) -> np.ndarray | None:
+        """``T_c_d``: the camera at the depth's exposure in the camera at the colour's, or None (see DepthTiming)."""
+        if self.depth_timing is None or not self.gyro:
+            return None
+        g_w = None if self.inertial is None else self.inertial.gravity_w
+        return self.depth_timing.camera_motion(self.gyro.samples(), self._gravity_prior_w if g_w is None else g_w,
+                                               stamp, stamp + offset_ns)
+
+    def _reanchor(self, prepared: PreparedFrame, T_c_w: np.ndarray) -> bool:
+        """Rebuild the map from its first frame, that frame's depth now moved to its colour's time (True: rebuilt).
+
+        The map was started before the camera's velocity was known, from depth off by the motion over the offset;
+        tracking against it with moved depth would mix the two (tuning bound seed 0, RGB-D: moving the depth from
+        the third frame on without rebuilding gave 12.7 cm against 6.1 never moving it, 2.4 rebuilt). A first frame
+        that left the velocity window gives way to this frame, its depth moved, at its tracked pose.
+        """
+        anchor, self._anchor = self._anchor, None
+        offset_ns = int(round(self.config.rig.depth_time_offset_s * 1e9))
+        request = Tracking.reset_request(prepared, T_c_w)
+        oldest = self.depth_timing.oldest_ns if self.depth_timing is not None else None
+        if anchor is not None and oldest is not None and anchor.stamp_ns >= oldest:
+            T_a_d = self._depth_motion(anchor.stamp_ns, offset_ns)
+            if T_a_d is not None:
+                depth = warp_depth(anchor.raw.depth_m, self.cameras[0], T_a_d[:3, :3], T_a_d[:3, 3])
+                request = Tracking.reset_request(self.frontend.with_depth(anchor.raw, depth), anchor.T_c_w)
+        return self._insert(request)
 
     def _coasts(self, out: TrackingOutcome, stamp: int) -> bool:
         """Whether a degraded frame held by depth and the motion prior alone keeps the motion trusted.
@@ -380,13 +432,15 @@ class Odometry:
         return None if verdict.level == OK else why + str(verdict.reason)
 
     def _initialise(self, prepared: PreparedFrame, stamp: int, T_c_w: np.ndarray, t0: float,
-                    note: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
+                    note: str | None, ev_frame: EventFrame | None = None, raw: PreparedFrame | None = None,
+                    moved: bool = False) -> OdometryResult:
         first = self.mapping.n_keyframes == 0  # never had a map: still initialising (e.g. no depth yet)
         why_not = self._unmappable(prepared, T_c_w)
         ok = why_not is None and self._insert(Tracking.reset_request(prepared, T_c_w)) and self.tracking.has_map
         t_track = time.perf_counter() - t0
         if ok:
             self._affine = (0.0, 0.0)
+            self._new_map(stamp, raw if raw is not None else prepared, T_c_w, moved)
             status = TrackingStatus.INITIALISING if first else TrackingStatus.REINITIALISED
             self.last_loss_reason = note
         else:
@@ -401,7 +455,8 @@ class Odometry:
         return self._result(stamp, T_c_w, None, status, t_track, ok)
 
     def _reinitialise(self, prepared: PreparedFrame, stamp: int, predicted: np.ndarray, t0: float,
-                      reason: str | None, ev_frame: EventFrame | None = None) -> OdometryResult:
+                      reason: str | None, ev_frame: EventFrame | None = None, raw: PreparedFrame | None = None,
+                      moved: bool = False) -> OdometryResult:
         """Tracking and relocalisation failed: a new map from this frame at the predicted pose (no jump, no NaN).
 
         A frame that cannot anchor a map (:meth:`_unmappable`) leaves the old map in place: the frame is
@@ -416,6 +471,9 @@ class Odometry:
             self.motion.reset()
             if self.inertial is not None:
                 self.inertial.reset()
+            self._new_map(stamp, raw if raw is not None else prepared, predicted, moved)
+            if self.depth_timing is not None:
+                self.depth_timing.reset()
         else:
             reason = f"{reason}; {why_not}" if reason else why_not
         self.motion.push(stamp, predicted, trusted=False)
@@ -429,6 +487,10 @@ class Odometry:
         status = TrackingStatus.REINITIALISED if ok else TrackingStatus.LOST
         self.last_loss_reason = reason
         return self._result(stamp, predicted, None, status, t_track, ok)
+
+    def _new_map(self, stamp: int, raw: PreparedFrame, T_c_w: np.ndarray, moved: bool) -> None:
+        """A map was started from this frame: kept for :meth:`_reanchor` unless its depth was already moved."""
+        self._anchor = None if moved or self.depth_timing is None else _Anchor(stamp, raw, T_c_w)
 
     # ------------------------------------------------------------------ output
     def _result(self, stamp: int, T_c_w: np.ndarray, out: TrackingOutcome | None, status: TrackingStatus,

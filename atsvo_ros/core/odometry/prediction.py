@@ -37,21 +37,6 @@ class Predictor:
             return None
         return self.inertial.predict(self.gyro.samples(), self.motion.history, stamp)
 
-    def camera_velocity(self, stamp: int, imu: CameraMotion | None) -> np.ndarray | None:
-        """The camera's velocity at ``stamp`` in its own frame (m/s), from the accelerometer's prediction ``imu``.
-
-        None without it. Not from constant velocity: a run that starts mid-stride has its first poses
-        centimetres off, and their difference moved the depth (and so the next pose) further off (tuning
-        bound seed 0: 6 -> 128 cm). The accelerometer's prediction exists only after its gravity estimate,
-        0.8 s of trusted poses.
-        """
-        if imu is None:
-            return None
-        T_pred = self.gyro_pose(stamp)
-        if T_pred is None:
-            T_pred = self.motion.predict(stamp)
-        return T_pred[:3, :3] @ imu.velocity_w
-
     def gyro_pose(self, stamp: int, centre: np.ndarray | None = None) -> np.ndarray | None:
         """``T_c_w`` with the rotation since the last frame from the gyro, or None when the IMU does not cover it.
 

@@ -4,67 +4,34 @@ from __future__ import annotations
 import numpy as np
 
 from atsvo_ros.core.geometry import se3_inv, so3_exp
-from atsvo_ros.core.imu import ImuBatch
-from atsvo_ros.core.odometry.inertial import STANDARD_GRAVITY, InertialPredictor
-
-MS = 1_000_000
-G_W = np.array([0.0, -STANDARD_GRAVITY, 0.0])  # the tracking world's axes are the first camera's: y down
-
-
-def _T_w_imu(t_s: float) -> np.ndarray:
-    """A trot, then a push-off: 4 g forward and up for 0.15 s from t = 1.2 s, the body pitching at 300 deg/s."""
-    T = np.eye(4)
-    T[:3, :3] = so3_exp(np.array([0.15 * np.sin(5.0 * t_s), 0.1 * np.sin(3.0 * t_s), 0.0])
-                        + np.array([max(0.0, t_s - 1.2) * 5.2, 0.0, 0.0]))
-    push = max(0.0, min(t_s, 1.35) - 1.2)
-    after = max(0.0, t_s - 1.35)
-    T[:3, 3] = [0.02 * np.sin(9.0 * t_s), 0.01 * np.cos(11.0 * t_s) - 20.0 * (push ** 2 / 2 + 0.15 * after),
-                0.4 * t_s + 20.0 * (push ** 2 / 2 + 0.15 * after)]
-    return T
-
-
-def _imu(T_c_imu: np.ndarray, span_s: float = 1.6, rate_hz: float = 400.0) -> ImuBatch:
-    """Rates and specific forces of :func:`_T_w_imu` by central differences (exact enough: ~1e-5)."""
-    t = np.arange(0.0, span_s, 1.0 / rate_hz)
-    h = 1e-4
-    gyro, accel = [], []
-    for ti in t:
-        Rm, R0, Rp = (_T_w_imu(ti + d)[:3, :3] for d in (-h, 0.0, h))
-        W = R0.T @ (Rp - Rm) / (2 * h)
-        gyro.append([W[2, 1], W[0, 2], W[1, 0]])
-        a_w = (_T_w_imu(ti + h)[:3, 3] - 2 * _T_w_imu(ti)[:3, 3] + _T_w_imu(ti - h)[:3, 3]) / (h * h)
-        accel.append(R0.T @ (a_w - G_W))
-    return ImuBatch((t * 1e9).astype(np.int64), np.array(gyro), np.array(accel))
-
-
-def _T_c_w(t_s: float, T_c_imu: np.ndarray) -> np.ndarray:
-    return T_c_imu @ se3_inv(_T_w_imu(t_s))
+from atsvo_ros.core.odometry.inertial import InertialPredictor
+from test.core.odometry.motion_helpers import G_W, MS, T_c_w, imu_batch
 
 
 def test_gravity_is_estimated_from_trusted_poses_and_predicts_the_push_off():
     T_c_imu = np.eye(4)
     T_c_imu[:3, :3] = so3_exp(np.array([0.0, 0.0, np.pi / 2]))
     T_c_imu[:3, 3] = [0.03, -0.01, 0.02]  # the D455's BMI055 sits centimetres off the colour lens
-    imu = _imu(T_c_imu)
+    imu = imu_batch(T_c_imu)
     pred = InertialPredictor(T_c_imu)
     stamps = [int(round(k / 30.0 * 1e9)) for k in range(48)]
     for s in stamps[:36]:  # the trot: trusted frames up to 1.17 s
-        pred.observe(imu, s, _T_c_w(s * 1e-9, T_c_imu), trusted=True)
+        pred.observe(imu, s, T_c_w(s * 1e-9, T_c_imu), trusted=True)
         if s < 800 * MS:
             assert pred.gravity_w is None  # needs two spans of trusted poses
     assert np.linalg.norm(pred.gravity_w - G_W) < 0.05
     # through the push-off (no pose trusted any more, as when the camera blurs), one frame ahead from two exact poses
     worst_imu = worst_cv = worst_v = 0.0
     for k in range(36, 46):
-        hist = ((stamps[k - 2], _T_c_w(stamps[k - 2] * 1e-9, T_c_imu)), (stamps[k - 1], _T_c_w(stamps[k - 1] * 1e-9,
+        hist = ((stamps[k - 2], T_c_w(stamps[k - 2] * 1e-9, T_c_imu)), (stamps[k - 1], T_c_w(stamps[k - 1] * 1e-9,
                                                                                                T_c_imu)))
-        truth = se3_inv(_T_c_w(stamps[k] * 1e-9, T_c_imu))[:3, 3]
+        truth = se3_inv(T_c_w(stamps[k] * 1e-9, T_c_imu))[:3, 3]
         motion = pred.predict(imu, hist, stamps[k])
         c0, c1 = (se3_inv(T)[:3, 3] for _, T in hist)
         worst_imu = max(worst_imu, float(np.linalg.norm(motion.centre_w - truth)))
         # the camera's velocity, lever arm included (1e-4 s central difference of the true centre)
-        v_true = (se3_inv(_T_c_w(stamps[k] * 1e-9 + 1e-4, T_c_imu))[:3, 3]
-                  - se3_inv(_T_c_w(stamps[k] * 1e-9 - 1e-4, T_c_imu))[:3, 3]) / 2e-4
+        v_true = (se3_inv(T_c_w(stamps[k] * 1e-9 + 1e-4, T_c_imu))[:3, 3]
+                  - se3_inv(T_c_w(stamps[k] * 1e-9 - 1e-4, T_c_imu))[:3, 3]) / 2e-4
         worst_v = max(worst_v, float(np.linalg.norm(motion.velocity_w - v_true)))
         worst_cv = max(worst_cv, float(np.linalg.norm(2 * c1 - c0 - truth)))
     assert worst_imu < 1e-3 and worst_cv > 2e-2, (worst_imu, worst_cv)  # measured: 0.12 mm against 3.3 cm
@@ -73,15 +40,15 @@ def test_gravity_is_estimated_from_trusted_poses_and_predicts_the_push_off():
 
 def test_no_centre_without_gravity_or_imu_cover_and_untrusted_poses_are_ignored():
     T_c_imu = np.eye(4)
-    imu = _imu(T_c_imu, span_s=1.0)
+    imu = imu_batch(T_c_imu, span_s=1.0)
     pred = InertialPredictor(T_c_imu)
-    hist = ((0, _T_c_w(0.0, T_c_imu)), (33 * MS, _T_c_w(0.033, T_c_imu)))
+    hist = ((0, T_c_w(0.0, T_c_imu)), (33 * MS, T_c_w(0.033, T_c_imu)))
     assert pred.predict(imu, hist, 66 * MS) is None  # no gravity yet
     for k in range(30):
-        pred.observe(imu, k * 33 * MS, _T_c_w(k * 0.033, T_c_imu), trusted=False)
+        pred.observe(imu, k * 33 * MS, T_c_w(k * 0.033, T_c_imu), trusted=False)
     assert pred.gravity_w is None
     for k in range(30):
-        pred.observe(imu, k * 33 * MS, _T_c_w(k * 0.033, T_c_imu), trusted=True)
+        pred.observe(imu, k * 33 * MS, T_c_w(k * 0.033, T_c_imu), trusted=True)
     assert pred.gravity_w is not None and pred.predict(imu, hist, 66 * MS) is not None
     assert pred.predict(imu, hist, 1100 * MS) is None  # 100 ms past the last sample
     pred.reset()
