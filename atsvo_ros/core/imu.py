@@ -83,13 +83,25 @@ def _check_covers(batch: ImuBatch, t0_ns: int, t1_ns: int) -> None:
                        f"[{t0_ns}, {t1_ns}] ns")
 
 
+def _around(batch: ImuBatch, t0_ns: int, t1_ns: int) -> ImuBatch:
+    """The samples linear interpolation from ``t0_ns`` to ``t1_ns`` needs: those between and one on each side.
+
+    ``np.interp`` over them equals ``np.interp`` over the whole batch there; the odometry keeps 3 s of IMU
+    (~1,200 samples) and interpolates over one frame's ~15 several times a frame.
+    """
+    i0 = max(int(np.searchsorted(batch.stamps_ns, t0_ns, side="right")) - 1, 0)
+    i1 = min(int(np.searchsorted(batch.stamps_ns, t1_ns, side="left")) + 1, len(batch))
+    return batch.select(slice(i0, i1))
+
+
 def interpolate_gyro(batch: ImuBatch, t_ns: np.ndarray) -> np.ndarray:
     """Angular velocity (M, 3) at stamps ``t_ns``, linear between samples; stamps must lie inside the batch."""
     t = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
     _check_covers(batch, int(t.min()), int(t.max()))
-    x = (batch.stamps_ns - batch.stamps_ns[0]).astype(np.float64)
+    part = _around(batch, int(t.min()), int(t.max()))
+    x = (part.stamps_ns - batch.stamps_ns[0]).astype(np.float64)
     tq = (t - batch.stamps_ns[0]).astype(np.float64)
-    return np.stack([np.interp(tq, x, batch.gyro_rad_s[:, k]) for k in range(3)], axis=-1)
+    return np.stack([np.interp(tq, x, part.gyro_rad_s[:, k]) for k in range(3)], axis=-1)
 
 
 def _chain_product(R: np.ndarray) -> np.ndarray:
@@ -183,10 +195,11 @@ def preintegrate(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns: 
     inner = batch.stamps_ns[i0:i1]
     inner = inner[inner < t1_ns]
     edges = np.concatenate([[t0_ns], inner, [t1_ns]]).astype(np.int64)
-    x = (batch.stamps_ns - t0_ns).astype(np.float64)
+    part = _around(batch, t0_ns, t1_ns)
+    x = (part.stamps_ns - t0_ns).astype(np.float64)
     xq = (edges - t0_ns).astype(np.float64)
-    gyro = np.stack([np.interp(xq, x, batch.gyro_rad_s[:, k]) for k in range(3)], axis=-1)
-    accel = np.stack([np.interp(xq, x, batch.accel_m_s2[:, k]) for k in range(3)], axis=-1)
+    gyro = np.stack([np.interp(xq, x, part.gyro_rad_s[:, k]) for k in range(3)], axis=-1)
+    accel = np.stack([np.interp(xq, x, part.accel_m_s2[:, k]) for k in range(3)], axis=-1)
     out = _preintegrate(np.ascontiguousarray(xq * 1e-9), np.ascontiguousarray(gyro), np.ascontiguousarray(accel))
     return Preintegration((t1_ns - t0_ns) * 1e-9, project_to_so3(out[:9].reshape(3, 3)), out[9:12].copy(),
                           out[12:].copy())

