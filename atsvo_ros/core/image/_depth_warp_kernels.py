@@ -1,13 +1,24 @@
 """numba kernel of the depth warp; private, see :mod:`atsvo_ros.core.image.depth_warp`.
 
-Explicit signature: compiled (or loaded from numba's cache) at import, never per frame. ``parallel=True`` for
-the row loop's compilation: on one thread (the wrapper's) 1.9 ms a 640x480 frame with a translation against 8 ms
-compiled as a plain loop, measured with one division a lookup (the plain loop gained nothing from that alone).
+Explicit signature: compiled (or loaded from numba's cache) at import, never per frame.
 """
 from __future__ import annotations
 
+import os
+
+import numba
 import numpy as np
 from numba import njit, prange
+
+# Compiled as a parallel loop, the kernel takes 1.9 ms a 640x480 frame with a translation on one thread (the
+# wrapper's) against 7.9 as a plain loop: same arithmetic, better code. One thread keeps the tracking thread's
+# cost where it was, with no second core spinning beside the robot's other work. Of numba's threading layers,
+# GNU OpenMP aborts a process that forks after using it (a worker pool, the benchmarks' jobs): fork-safe ones
+# first unless the user chose. Set before the decorators (compiling or loading a parallel kernel starts the
+# layer), in numba's configuration and in the environment (numba re-reads its configuration from there).
+if numba.config.THREADING_LAYER == "default" and "NUMBA_THREADING_LAYER_PRIORITY" not in os.environ:
+    os.environ["NUMBA_THREADING_LAYER_PRIORITY"] = "tbb workqueue omp"
+    numba.config.THREADING_LAYER_PRIORITY = ["tbb", "workqueue", "omp"]
 
 
 @njit("float64(float32[:, ::1], float64, float64, float64, float64, float64[:, ::1], float64, float64, float64)",

@@ -1,6 +1,9 @@
 """Turning a depth image to another moment by the camera's rotation in between."""
 from __future__ import annotations
 
+import multiprocessing
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from atsvo_ros.core.camera import CameraModel
@@ -65,3 +68,18 @@ def test_a_moved_plane_takes_the_translation_in_its_depths():
     rot = rotate_depth(z, CAM, R)[iv, iu]
     assert np.median(np.abs(rot - want)[rot > 0]) > 0.025
     np.testing.assert_array_equal(warp_depth(z, CAM, R, np.zeros(3)), rotate_depth(z, CAM, R))
+
+
+def _mean_warped(_: int) -> float:
+    return float(warp_depth(_plane_depth(), CAM, _rotation(1, 4.0), np.array([0.01, 0.0, -0.03])).mean())
+
+
+def test_a_process_that_warped_can_fork_and_threads_can_share_it():
+    """The kernel is a numba parallel loop: GNU OpenMP would abort a forked child of a process that ran it (the
+    benchmarks' worker pools), and numba's workqueue layer must not be entered from two threads at once."""
+    want = _mean_warped(0)
+    with multiprocessing.get_context("fork").Pool(2) as pool:
+        # a child that aborts never answers: a timeout, not a hung suite
+        assert pool.map_async(_mean_warped, range(2)).get(timeout=60) == [want, want]
+    with ThreadPoolExecutor(3) as ex:
+        assert list(ex.map(_mean_warped, range(6))) == [want] * 6
