@@ -1,4 +1,4 @@
-"""Shared fixtures: the real recordings in ../shared/realdata (skipped when absent), a simulated 3 s trot."""
+"""Shared fixtures: the real recordings in ../shared/realdata (skipped when absent), simulated trots."""
 from __future__ import annotations
 
 import os
@@ -36,3 +36,22 @@ def simulate_bag(tmp_path_factory, name: str, args: list[str]) -> Path:
 def trot_3s_bag(tmp_path_factory) -> Path:
     """:data:`TROT_3S_ARGS` written once per session by atsvo-sim (~35 s on 2 cores)."""
     return simulate_bag(tmp_path_factory, "trot_3s", TROT_3S_ARGS)
+
+
+#: The 1 s synthetic trot that the replay's end-to-end tests write in every container.
+TROT_1S_ARGS = ["--scenario", "trot", "--duration", "1.0", "--seed", "0", "--width", "160", "--height", "120",
+                "--event-scale", "0.25", "--quiet"]
+BAG_FORMATS = ("ros1", "sqlite3", "mcap")
+
+
+@pytest.fixture(scope="session")
+def trot_1s_bags(tmp_path_factory) -> dict[str, Path]:
+    """:data:`TROT_1S_ARGS` written once per session in each of :data:`BAG_FORMATS`: format -> the path readers take."""
+    from atsvo_ros.tools.sim import main as sim_main
+
+    root = tmp_path_factory.mktemp("trot_1s")
+    bags = {}
+    for fmt in BAG_FORMATS:
+        assert sim_main([*TROT_1S_ARGS, "--out", str(root / fmt), "--format", fmt]) == 0
+        bags[fmt] = root / fmt / "sequence.bag" if fmt == "ros1" else root / fmt
+    return bags

@@ -130,8 +130,9 @@ def _run(bag: Path, args: argparse.Namespace, rate: float, log_dir: Path, repeat
         t_played = time.monotonic()
         probe.wait_idle(len(played.frame_stamps_ns) - 1, idle_s=3.0)
         cpu_node, cpu_own = procs.cpu_s() - cpu0_node, time.process_time() - cpu0_own
-        n_diag = probe.diagnostics_count
-        probe.wait(lambda: probe.diagnostics_count > n_diag + 1, 5.0)
+        # the tracking node's own status, twice (the mapping node publishes /diagnostics as well)
+        n_diag = probe.diag_count("atsvo_tracking: odometry")
+        probe.wait(lambda: probe.diag_count("atsvo_tracking: odometry") > n_diag + 1, 5.0)
         diag = probe.diag("atsvo_tracking: odometry") or {}
         received = probe.received()
         statuses = probe.statuses()

@@ -68,8 +68,6 @@ def _save_npz(path: Path, **arrays: np.ndarray) -> None:
 
 def simulated_frames(spec: Any, progress: bool = True) -> tuple[list[tuple[int, np.ndarray, np.ndarray]], Any, Any]:
     """``[(stamp_ns, rgb, depth_m)]``, the IMU batch (or None) and the simulation, cached on disk."""
-
-
     sim = make_simulation(spec)
     path = _cache_file(spec)
     if path.is_file():
@@ -92,8 +90,6 @@ def simulated_frames(spec: Any, progress: bool = True) -> tuple[list[tuple[int, 
 
 def simulated_events(spec: Any, progress: bool = True) -> Any:
     """The whole event stream of a sequence as one EventBatch, cached on disk like the frames."""
-
-
     path = _events_cache_file(spec)
     if path.is_file():
         with np.load(path) as z:
@@ -102,6 +98,7 @@ def simulated_events(spec: Any, progress: bool = True) -> Any:
     batches = list(tqdm(sim.events(), desc=f"simulate events {spec.scenario}", disable=not progress,
                         file=sys.stderr, leave=False, unit="packet"))
     ev = EventBatch.concatenate(batches)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # parallel runs may fill the same entry
     _save_npz(tmp, x=ev.x, y=ev.y, t=ev.t, p=ev.p, w=np.int64(ev.width), h=np.int64(ev.height))
     tmp.replace(path)

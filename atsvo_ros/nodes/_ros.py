@@ -11,8 +11,10 @@ keyframe requests reliable keep-last 8.
 from __future__ import annotations
 
 import array
+import faulthandler
 import importlib
 import os
+import signal
 import sys
 import threading
 import time
@@ -30,6 +32,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from atsvo_ros.config import TopicsConfig
 from atsvo_ros.errors import AtsvoError
+
+#: Seconds the clean-up after Ctrl-C may take (closing the worker, the executor, DDS) before the process dumps
+#: its threads' stacks to the log and ends with 1 (measured: well under 2 s on this machine).
+SHUTDOWN_LIMIT_S = 15.0
 
 SENSOR_QOS = qos_profile_sensor_data
 #: Image inputs: sensor-data QoS with a reader history of 30 (1 s at 30 Hz) instead of 5. A Python executor
@@ -207,13 +213,17 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
     The executor is the nodes' ``node.executor`` parameter (``threads`` for the multi-threaded one). A
     configuration error (bad parameter file) ends the process at start with one line and exit code 1;
     Ctrl-C and external shutdowns end it with 0. A bug in a worker thread (reported through
-    ``node.fatal_error``) ends it with 1 after its traceback was logged.
+    ``node.fatal_error``) ends it with 1 after its traceback was logged. ``kill -USR1 PID`` writes every
+    thread's stack to the log; a clean-up after the spin that takes longer than ``SHUTDOWN_LIMIT_S`` (a
+    thread or DDS that hangs) writes them and ends the process with 1, so Ctrl-C never leaves it hanging.
     """
     argv = args if args is not None else sys.argv
     early = _preflight(prog, what, argv)
     if early is not None:
         return early
     sys.setswitchinterval(float(os.environ.get("ATSVO_SWITCH_S", sys.getswitchinterval())))
+    if hasattr(signal, "SIGUSR1"):
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         rclpy.init(args=argv)
     except RCLError as exc:  # a ROS argument rcl cannot parse (a broken parameter file): one line, not a traceback
@@ -234,6 +244,7 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
             while rclpy.ok() and not any(getattr(n, "fatal_error", None) for n in nodes):
                 executor.spin_once(timeout_sec=0.2)
         finally:
+            faulthandler.dump_traceback_later(SHUTDOWN_LIMIT_S, exit=True)
             executor.shutdown(timeout_sec=1.0)
         if any(getattr(n, "fatal_error", None) for n in nodes):
             code = 1
@@ -246,6 +257,7 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
                 close()
             n.destroy_node()
         rclpy.try_shutdown()
+        faulthandler.cancel_dump_traceback_later()
     return code
 
 

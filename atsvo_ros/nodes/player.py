@@ -212,6 +212,7 @@ class OdometryProbe:
         self.maps: list[Any] = []
         self.diagnostics: dict[str, dict[str, str]] = {}  # status name -> latest values
         self.diagnostics_count = 0
+        self.status_counts: dict[str, int] = {}  # status name -> messages that carried it
         reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         node.create_subscription(Odometry, topics.odometry, self._on_odom, reliable)
         node.create_subscription(DiagnosticArray, topics.status, self._on_status, reliable)
@@ -243,6 +244,12 @@ class OdometryProbe:
             for s in msg.status:
                 self.diagnostics[s.name] = {kv.key: kv.value for kv in s.values} | {"_message": s.message,
                                                                                      "_level": int(s.level[0])}
+                self.status_counts[s.name] = self.status_counts.get(s.name, 0) + 1
+
+    def diag_count(self, name_part: str) -> int:
+        """How many diagnostics messages carried the status whose name contains ``name_part``."""
+        with self._lock:
+            return sum(n for name, n in self.status_counts.items() if name_part in name)
 
     def diag(self, name_part: str) -> dict[str, str] | None:
         """The latest diagnostics values of the status whose name contains ``name_part``."""
@@ -389,7 +396,8 @@ class NodeProcesses:
         return " | ".join(Path(log).read_text()[-n:] for log in self.logs)
 
     def stop(self, timeout_s: float = 30.0) -> list[int]:
-        """Ctrl-C every process; their exit codes (a process that ignores it is killed: -9)."""
+        """Ctrl-C every process; their exit codes (a process that ignores it has its thread stacks written to
+        its log with SIGUSR1, then is killed: -9)."""
         self._stop.set()
         for p in self.procs:
             if p.poll() is None:
@@ -399,6 +407,8 @@ class NodeProcesses:
             try:
                 codes.append(p.wait(timeout=timeout_s))
             except subprocess.TimeoutExpired:
+                p.send_signal(signal.SIGUSR1)
+                time.sleep(1.0)
                 p.kill()
                 p.wait()
                 codes.append(-9)

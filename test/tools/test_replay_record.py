@@ -21,7 +21,6 @@ from atsvo_ros.tools import replay as replay_mod
 from atsvo_ros.tools.replay import main, replay
 from test.io.test_bags import write_bag
 from test.tools.test_replay import FakeOdometry, _with_fake
-from test.tools.test_replay_sim import SIM_ARGS
 
 ROOT = Path(__file__).resolve().parents[2]
 LAYOUT = ROOT / "config" / "foxglove_layout.json"
@@ -49,13 +48,10 @@ def read_bag(path: Path) -> tuple[dict[str, str], dict[str, list]]:
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
+def recorded(trot_1s_bags, tmp_path_factory):
     """The trot replayed twice, without and with --record (and --gt): (sequence, plain, recorded result, bag)."""
-    from atsvo_ros.tools.sim import main as sim_main
-
     root = tmp_path_factory.mktemp("rec")
-    seq = root / "seq"
-    assert sim_main([*SIM_ARGS, "--out", str(seq), "--format", "mcap"]) == 0
+    seq = trot_1s_bags["mcap"]
     plain = replay(seq, root / "plain", load_config("synthetic"), plots=False, progress=False)
     bag = root / "bags" / "run.mcap"  # its folder is made
     res = replay(seq, root / "rec", load_config("synthetic"), plots=False, progress=False, record=bag,

@@ -6,7 +6,6 @@ identical trajectories; the trajectory's ATE is the same from atsvo-eval and fro
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,24 +14,12 @@ from atsvo_ros.config import load_config
 from atsvo_ros.io.trajectory import read_tum
 from atsvo_ros.tools.replay import replay
 
-SIM_ARGS = ["--scenario", "trot", "--duration", "1.0", "--seed", "0", "--width", "160", "--height", "120",
-            "--event-scale", "0.25", "--quiet"]
-
-
-def _simulate(out: Path, fmt: str) -> Path:
-    from atsvo_ros.tools.sim import main as sim_main
-
-    assert sim_main([*SIM_ARGS, "--out", str(out), "--format", fmt]) == 0
-    return out / "sequence.bag" if fmt == "ros1" else out
-
 
 @pytest.fixture(scope="module")
-def sim_runs(tmp_path_factory):
-    pytest.importorskip("atsvo_ros.tools.sim")
+def sim_runs(trot_1s_bags, tmp_path_factory):
     root = tmp_path_factory.mktemp("sim")
     runs = {}
-    for fmt in ("ros1", "sqlite3", "mcap"):
-        bag = _simulate(root / fmt, fmt)
+    for fmt, bag in trot_1s_bags.items():
         res = replay(bag, root / f"out_{fmt}", load_config("synthetic"), plots=fmt == "mcap", progress=False)
         runs[fmt] = (bag, root / f"out_{fmt}", res)
     return runs
