@@ -415,7 +415,9 @@ class NodeConfig:
                                    "behind in stamp time (and, in the node, silent this long in wall time: a "
                                    "backlog still draining is late, not dead) counts as stalled and frames go "
                                    "without gyro, counted as frames_without_imu (a dead IMU costs this much "
-                                   "latency once; samples arriving after their frame are dropped, imu_late)")
+                                   "latency once; samples arriving after their frame are dropped, imu_late). "
+                                   "When an IMU is expected (node.use_imu in the node, an IMU topic in a "
+                                   "recording) the first frames wait as long for its first sample")
     publish_tf: bool = _f(True, doc="broadcast odom -> base_link on /tf")
     diagnostics_period_s: float = _f(1.0, 0.0, 3600.0, lo_open=True, doc="period of /diagnostics")
     executor: str = _f("events", choices=("events", "multi_threaded", "single_threaded"),

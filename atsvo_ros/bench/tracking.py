@@ -184,7 +184,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     overrides = {"rig.depth_time_offset_s": sim.depth_phase_s, **(overrides or {})}
     cfg = load_config(spec.config or "synthetic", overrides=overrides)
     rt = OdometryRuntime(cfg, sim.rig.rgb_camera, sim.rig.event_camera,
-                         use_events=use_events and cfg.mode == "fused")
+                         use_events=use_events and cfg.mode == "fused", expect_imu=use_imu and imu is not None)
     results, cpu = [], []
     t_wall = time.perf_counter()
     for kind, item in _interleaved(frames, imu if use_imu else None, events, flood_ev_s, seed):

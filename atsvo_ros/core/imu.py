@@ -145,15 +145,19 @@ def gyro_rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns:
     """:func:`integrate_gyro` from ``t0_ns`` to ``t1_ns``, holding the first/last rate up to ``max_extrapolation_ns``.
 
     A frame is often processed before the IMU sample after its stamp has arrived (at 200 Hz the last one
-    is up to 5 ms old, plus transport), and the first frame may precede the first sample; over a few
-    milliseconds the rate barely changes. Raises :class:`ImuError` when the samples miss the interval by more.
+    is up to 5 ms old, plus transport), and the first frame (and a depth exposed before it) may precede the
+    first sample; over a few milliseconds the rate barely changes. Raises :class:`ImuError` when the samples
+    miss the interval by more.
     """
     t0_ns, t1_ns = int(t0_ns), int(t1_ns)
     if len(batch) == 0:
         raise ImuError("no IMU samples to integrate")
     a, b = max(t0_ns, batch.t_first_ns), min(t1_ns, batch.t_last_ns)
-    if a - t0_ns > max_extrapolation_ns or t1_ns - b > max_extrapolation_ns or a > b:
+    if a - t0_ns > max_extrapolation_ns or t1_ns - b > max_extrapolation_ns:
         return integrate_gyro(batch, t0_ns, t1_ns)  # raises with the spans
+    if a > b:  # the whole interval before the first sample or after the last, within reach: hold that rate
+        rate = batch.gyro_rad_s[0] if t1_ns <= batch.t_first_ns else batch.gyro_rad_s[-1]
+        return project_to_so3(so3_exp(rate * ((t1_ns - t0_ns) * 1e-9)))
     R = integrate_gyro(batch, a, b)
     if a > t0_ns:
         R = so3_exp(batch.gyro_rad_s[0] * ((a - t0_ns) * 1e-9)) @ R

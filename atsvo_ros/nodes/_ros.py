@@ -206,6 +206,18 @@ def _preflight(prog: str, what: str, argv: Sequence[str]) -> int | None:
     return None
 
 
+def _stack_file() -> Any:
+    """Where thread stacks go (the process's standard error, file descriptor 2); None without one.
+
+    ``sys.__stderr__``, not ``sys.stderr``: a test harness's replacement of the latter has no file descriptor.
+    """
+    err = sys.__stderr__
+    try:
+        return err if err is not None and err.fileno() >= 0 else None
+    except (OSError, ValueError):  # closed, or not a file: no stacks, the node runs as before
+        return None
+
+
 def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | None = None,
               threads: int = 2, what: str = "") -> int:
     """Init rclpy, build the nodes, spin until Ctrl-C / shutdown, clean up; the process's exit code.
@@ -222,8 +234,9 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
     if early is not None:
         return early
     sys.setswitchinterval(float(os.environ.get("ATSVO_SWITCH_S", sys.getswitchinterval())))
-    if hasattr(signal, "SIGUSR1"):
-        faulthandler.register(signal.SIGUSR1, all_threads=True)
+    stacks_to = _stack_file()
+    if stacks_to is not None and hasattr(signal, "SIGUSR1"):
+        faulthandler.register(signal.SIGUSR1, file=stacks_to, all_threads=True)
     try:
         rclpy.init(args=argv)
     except RCLError as exc:  # a ROS argument rcl cannot parse (a broken parameter file): one line, not a traceback
@@ -244,7 +257,8 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
             while rclpy.ok() and not any(getattr(n, "fatal_error", None) for n in nodes):
                 executor.spin_once(timeout_sec=0.2)
         finally:
-            faulthandler.dump_traceback_later(SHUTDOWN_LIMIT_S, exit=True)
+            if stacks_to is not None:
+                faulthandler.dump_traceback_later(SHUTDOWN_LIMIT_S, exit=True, file=stacks_to)
             executor.shutdown(timeout_sec=1.0)
         if any(getattr(n, "fatal_error", None) for n in nodes):
             code = 1
@@ -257,7 +271,8 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
                 close()
             n.destroy_node()
         rclpy.try_shutdown()
-        faulthandler.cancel_dump_traceback_later()
+        if stacks_to is not None:
+            faulthandler.cancel_dump_traceback_later()
     return code
 
 

@@ -128,7 +128,7 @@ class TrackingNode(Node):
         # arrival clock: a stream is stalled when silent, not merely behind (backlogs drain unevenly)
         factory = make_core if self._core_host is None else self._core_host.new_core  # the child builds the Odometry
         self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=factory,
-                                       clock=time.monotonic_ns)
+                                       clock=time.monotonic_ns, expect_imu=nc.use_imu)
         # loss-free mode (reliable inputs, synchronous mapping: every frame must count, as in the replay): the queue
         # holds a backlog of LOSS_FREE_QUEUE frames instead of node.queue_size. It cannot block: the default
         # executor is single-threaded, and a blocked sensor callback would starve the map snapshots it waits for.

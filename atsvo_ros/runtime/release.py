@@ -34,7 +34,7 @@ class FrameRelease:
 
     def __init__(self, config: AtsvoConfig, assembler: FrameAssembler, problems: ProblemLog, *,
                  clock: Callable[[], int] | None, clock_jump_s: float, imu_keep_ns: int,
-                 max_held_frames: int) -> None:
+                 max_held_frames: int, expect_imu: bool = False) -> None:
         """Create the gate.
 
         Args:
@@ -45,6 +45,8 @@ class FrameRelease:
             clock_jump_s: An IMU batch this far behind the last cut starts the stream over.
             imu_keep_ns: IMU samples kept waiting for a frame.
             max_held_frames: Frames held while the colour camera_info is missing.
+            expect_imu: An IMU stream is coming: the first frames wait ``node.imu_max_wait_s`` of stamps for its
+                first sample (without, a frame goes as soon as it is paired until the IMU speaks).
         """
         self.assembler = assembler
         self._problems = problems
@@ -63,6 +65,8 @@ class FrameRelease:
                                     * 1e9))
         self._imu_wait_ns = int(round(config.node.imu_max_wait_s * 1e9))  # then the IMU counts as silent
         self._held: deque[FrameInput] = deque()  # frames waiting for the colour camera_info
+        # no IMU expected, or it never spoke within imu_max_wait_s of stamps after the first frame: frames go
+        self._imu_absent = not expect_imu
 
     def add_imu(self, batch: ImuBatch) -> None:
         """IMU samples (time order), buffered for the frames to come; late ones are dropped and counted.
@@ -121,7 +125,13 @@ class FrameRelease:
         newest = self.assembler.newest_ns
         silent = self._clock is None or self._imu_heard_ns is None or \
             self._clock() - self._imu_heard_ns > self._imu_wait_ns
-        stalled = mark is None or (newest is not None and newest - mark > self._imu_wait_ns and silent) or \
+        if mark is None and not self._imu_absent and self._await_imu and newest is not None:
+            # The first frames wait for the IMU's first sample as later frames wait for the next: streams that
+            # start together deliver the first frame before it, its IMU cut came out empty and the samples up
+            # to it were then dropped as late, so the map's first depth missed the gyro's turn over its offset
+            self._imu_absent = newest - int(self._await_imu[0][0].stamp_ns) > self._imu_wait_ns
+        stalled = (mark is None and self._imu_absent) or \
+            (mark is not None and newest is not None and newest - mark > self._imu_wait_ns and silent) or \
             len(self._await_imu) > self.assembler.max_pending
         while self._await_imu:
             behind = mark is None or mark < int(self._await_imu[0][0].stamp_ns) + self._offset_ns

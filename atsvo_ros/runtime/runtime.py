@@ -77,8 +77,9 @@ class OdometryRuntime:
                  event_camera: CameraModel | None = None, *, use_events: bool | None = None,
                  logger: Logger | None = None, core_factory: Callable[..., OdometryCore] | None = None,
                  log_interval_s: float = 10.0, sinks: Sequence[Sink] = (),
-                 clock: Callable[[], int] | None = None) -> None:
-        """``clock``: arrival time in ns (the node: ``time.monotonic_ns``); None (replay) judges stalls by stamps."""
+                 clock: Callable[[], int] | None = None, expect_imu: bool = False) -> None:
+        """``clock``: arrival time in ns (the node: ``time.monotonic_ns``); None (replay) judges stalls by stamps.
+        ``expect_imu``: IMU messages will come (the first frames wait for the first of them, see FrameRelease)."""
         self.config = config
         #: called with every output, right after its frame (the core holds that frame's state: surface, map)
         self.sinks: tuple[Sink, ...] = tuple(sinks)
@@ -99,7 +100,7 @@ class OdometryRuntime:
                                         clock=clock)
         self._release = FrameRelease(config, self.assembler, self._problems, clock=clock,
                                      clock_jump_s=self.CLOCK_JUMP_S, imu_keep_ns=self.IMU_KEEP_NS,
-                                     max_held_frames=self.MAX_HELD_FRAMES)
+                                     max_held_frames=self.MAX_HELD_FRAMES, expect_imu=expect_imu)
         self._clocks = ClockCheck(self._problems)
         self._event_clock = EventClock(config.event_camera.time_offset_s, self._problems)
         self._offset_search = EventOffsetSearch(config.event_camera.time_offset_search_s if self.use_events else 0.0,

@@ -174,7 +174,8 @@ def _replay(paths: list[Path], out: Path, config: AtsvoConfig | None, mode: str 
         if record is not None:
             recorder = BagRecorder(record, config, force=force).open()
         runtime = OdometryRuntime(config, rgb_cam, ev_cam, use_events=mode == "fused" and source.has("events"),
-                                  logger=log, core_factory=odometry_factory, sinks=(recorder,) if recorder else ())
+                                  logger=log, core_factory=odometry_factory, sinks=(recorder,) if recorder else (),
+                                  expect_imu=source.has("imu"))
         use_events = runtime.use_events
         if mode == "fused" and not use_events:
             notes.append("RGB-D only: the recording has no event topic")

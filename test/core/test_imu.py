@@ -106,6 +106,13 @@ def test_gyro_rotation_holds_the_last_rate_briefly():
     assert np.allclose(so3_log(R), w * 0.032, atol=1e-9)
     with pytest.raises(ImuError):
         gyro_rotation(batch, 50_000_000, 140_000_000)  # 40 ms past it: not extrapolated
+    # a depth exposed before the first frame's colour, both before the first sample: the first rate held
+    R = gyro_rotation(batch, -11_000_000, -1_000_000)
+    assert np.allclose(so3_log(R), w * 0.010, atol=1e-9)
+    R = gyro_rotation(batch, 101_000_000, 110_000_000)  # wholly after the last one, within reach
+    assert np.allclose(so3_log(R), w * 0.009, atol=1e-9)
+    with pytest.raises(ImuError):
+        gyro_rotation(batch, -40_000_000, -35_000_000)  # 35 ms before it: out of reach
 
 
 def _position(t_s: np.ndarray) -> np.ndarray:

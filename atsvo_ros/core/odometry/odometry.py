@@ -62,6 +62,7 @@ class _Anchor:
     stamp_ns: int
     raw: PreparedFrame
     T_c_w: np.ndarray
+    turned: bool  # the map's depth was turned by the gyro (False: no gyro over its offset yet)
 
 
 def _best_attempt(attempts: list[tuple[TrackingOutcome, bool, TrackingStatus]]
@@ -190,6 +191,8 @@ class Odometry:
         if not self.tracking.has_map:
             self.event_side.end_frame(n_events)
             return self._initialise(prepared, stamp, predicted, t0, note, ev_frame, raw, moved)
+        if self._anchor is not None and not self._anchor.turned:
+            self._turn_anchor()
         imu = self.predictor.imu_motion(stamp) if self.config.tracker.imu_translation else None
         imu_centre = None if imu is None else imu.centre_w
         gyro = self.predictor.gyro_pose(stamp, imu_centre)
@@ -331,6 +334,21 @@ class Odometry:
                 request = Tracking.reset_request(self.frontend.with_depth(anchor.raw, depth), anchor.T_c_w)
         return self._insert(request)
 
+    def _turn_anchor(self) -> None:
+        """Rebuild the map from its first frame once the gyro covers that frame's depth offset (before tracking).
+
+        Streams that start together hand the first frame over before the IMU's first sample: its depth, exposed
+        ``rig.depth_time_offset_s`` off the colour, went into the map unturned. Mid-turn that is degrees (tuning
+        bounds start at ~250 deg/s: 2-4 deg over the offset) and the next frame, tracked against it, came out
+        6-7 cm off.
+        """
+        anchor = self._anchor
+        turned, moved = self._depth_at_colour_time(anchor.raw, anchor.stamp_ns)
+        if turned is anchor.raw:
+            return  # the gyro does not cover it yet
+        self._anchor = None if moved or self.depth_timing is None else dataclasses.replace(anchor, turned=True)
+        self._insert(Tracking.reset_request(turned, anchor.T_c_w))
+
     def _coasts(self, out: TrackingOutcome, stamp: int) -> bool:
         """Whether a degraded frame held by depth and the motion prior alone keeps the motion trusted.
 
@@ -440,7 +458,7 @@ class Odometry:
         t_track = time.perf_counter() - t0
         if ok:
             self._affine = (0.0, 0.0)
-            self._new_map(stamp, raw if raw is not None else prepared, T_c_w, moved)
+            self._new_map(stamp, raw if raw is not None else prepared, T_c_w, moved, prepared is not raw)
             status = TrackingStatus.INITIALISING if first else TrackingStatus.REINITIALISED
             self.last_loss_reason = note
         else:
@@ -471,7 +489,7 @@ class Odometry:
             self.motion.reset()
             if self.inertial is not None:
                 self.inertial.reset()
-            self._new_map(stamp, raw if raw is not None else prepared, predicted, moved)
+            self._new_map(stamp, raw if raw is not None else prepared, predicted, moved, prepared is not raw)
             if self.depth_timing is not None:
                 self.depth_timing.reset()
         else:
@@ -488,9 +506,12 @@ class Odometry:
         self.last_loss_reason = reason
         return self._result(stamp, predicted, None, status, t_track, ok)
 
-    def _new_map(self, stamp: int, raw: PreparedFrame, T_c_w: np.ndarray, moved: bool) -> None:
-        """A map was started from this frame: kept for :meth:`_reanchor` unless its depth was already moved."""
-        self._anchor = None if moved or self.depth_timing is None else _Anchor(stamp, raw, T_c_w)
+    def _new_map(self, stamp: int, raw: PreparedFrame, T_c_w: np.ndarray, moved: bool, turned: bool) -> None:
+        """A map was started from this frame: kept for :meth:`_turn_anchor` (its depth not yet turned by the gyro)
+        and :meth:`_reanchor` (not yet moved) while its depth is not at its colour's time."""
+        offset = self.config.rig.depth_time_offset_s != 0.0
+        keep = offset and not moved and (self.depth_timing is not None or not turned)
+        self._anchor = _Anchor(stamp, raw, T_c_w, turned) if keep else None
 
     # ------------------------------------------------------------------ output
     def _result(self, stamp: int, T_c_w: np.ndarray, out: TrackingOutcome | None, status: TrackingStatus,
