@@ -344,9 +344,12 @@ class Odometry:
         """
         anchor = self._anchor
         turned, moved = self._depth_at_colour_time(anchor.raw, anchor.stamp_ns)
+        done = None if moved or self.depth_timing is None else dataclasses.replace(anchor, turned=True)
         if turned is anchor.raw:
-            return  # the gyro does not cover it yet
-        self._anchor = None if moved or self.depth_timing is None else dataclasses.replace(anchor, turned=True)
+            if self.gyro:  # the samples came, but too late to reach it (30 ms): the map stays, no more tries
+                self._anchor = done
+            return
+        self._anchor = done
         self._insert(Tracking.reset_request(turned, anchor.T_c_w))
 
     def _coasts(self, out: TrackingOutcome, stamp: int) -> bool:
