@@ -36,18 +36,19 @@ from atsvo_ros.io.trajectory import Trajectory
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.sim.motion import PHASES
 from atsvo_ros.sim.rgbd import DepthModel
-from atsvo_ros.sim.sequence import SequenceSpec, make_simulation, model_key
+from atsvo_ros.sim.sequence import SequenceSpec, make_simulation, model_key, spec_key
 from atsvo_ros.sim.stereo import StereoModel
 from atsvo_ros.tools._cli import add_config_args, run
 from atsvo_ros.tools.demo import cache_dir
 
 #: Bump when the cache's layout changes (the simulator's own changes are in :func:`model_key`).
-FRAME_CACHE_VERSION = 3
+#: 4: the IMU is simulated on every load, not cached (its model no longer invalidates the frames).
+FRAME_CACHE_VERSION = 4
 
 
 def _cache_file(spec: SequenceSpec) -> Path:
-    """Where a spec's frames are cached: keyed on the simulator's model and the whole spec (sensor models included)."""
-    key = f"{FRAME_CACHE_VERSION}|{model_key()}|{spec!r}"
+    """Where a spec's frames are cached: keyed on the simulator's camera models and the whole spec but the IMU's."""
+    key = f"{FRAME_CACHE_VERSION}|{model_key(imu=False)}|{spec_key(spec, imu=False)}"
     return cache_dir() / "frames" / f"{spec.scenario}_{spec.seed}_{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
 
 
@@ -67,23 +68,22 @@ def _save_npz(path: Path, **arrays: np.ndarray) -> None:
 
 
 def simulated_frames(spec: Any, progress: bool = True) -> tuple[list[tuple[int, np.ndarray, np.ndarray]], Any, Any]:
-    """``[(stamp_ns, rgb, depth_m)]``, the IMU batch (or None) and the simulation, cached on disk."""
+    """``[(stamp_ns, rgb, depth_m)]``, the IMU batch (or None) and the simulation; the frames are cached on disk,
+    the IMU (milliseconds to simulate) is not, so a change of its model keeps the frames."""
     sim = make_simulation(spec)
+    imu = ImuBatch.concatenate(list(sim.imu_sensor().batches())) if sim.has_imu else None
     path = _cache_file(spec)
     if path.is_file():
         with np.load(path) as z:
             frames = list(zip(z["stamps"].tolist(), z["rgb"], z["depth"]))
-            imu = ImuBatch(z["imu_t"], z["imu_g"], z["imu_a"]) if "imu_t" in z else None
         return frames, imu, sim
     n = int(spec.duration_s * spec.rate_hz) + 1
     frames = [(f.stamp_ns, f.rgb, f.depth_m) for f in tqdm(sim.frames(), total=n, desc=f"simulate {spec.scenario}",
                                                            disable=not progress, file=sys.stderr, leave=False)]
-    imu = ImuBatch.concatenate(list(sim.imu())) if sim.has_imu else None
     path.parent.mkdir(parents=True, exist_ok=True)
-    extra = {} if imu is None else {"imu_t": imu.stamps_ns, "imu_g": imu.gyro_rad_s, "imu_a": imu.accel_m_s2}
     tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # parallel runs may fill the same entry
     _save_npz(tmp, stamps=np.array([f[0] for f in frames], np.int64), rgb=np.stack([f[1] for f in frames]),
-              depth=np.stack([f[2] for f in frames]), **extra)
+              depth=np.stack([f[2] for f in frames]))
     tmp.replace(path)
     return frames, imu, sim
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from atsvo_ros.core.geometry import so3_log
+from atsvo_ros.core.geometry import so3_exp, so3_log
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import SimulationError
 
@@ -44,6 +44,15 @@ class ImuModel:
     clock-rate error of a few percent as seen in D455 logs (librealsense issue #13139: nominal
     400 Hz gyro samples 2.4345 ms apart). ``accel_rate_hz = 0`` samples the accelerometer with the
     gyro (one clock, no interpolation).
+
+    What the rig's calibration gets wrong, drawn per seed (the odometry is given the nominal rig): the gyro's
+    scale per axis, the IMU's axes against the rig's ``T_rgb_imu`` and the IMU's stamps against the cameras'.
+    These are assumptions, not datasheet figures, sized for a rig calibrated as users do (librealsense's
+    rs-imu-calibration for the IMU's scale and offsets, Kalibr for the camera-IMU rotation and time shift):
+    1 % of scale (an uncalibrated consumer MEMS gyro is off by a few percent), 0.3 deg of rotation per axis
+    and 0.5 ms of time (the D455 stamps IMU and images on one device clock). A wrong rotation turns a frame's
+    gyro rotation by about its angle times the misalignment; a time shift errs by the change of rate over it,
+    so both matter most at a flip's take-off.
     """
 
     gyro_rate_hz: float = 200.0
@@ -61,6 +70,9 @@ class ImuModel:
     accel_bits: int = 12
     stamp_resolution_ns: int = 1000  # device clock tick
     stamp_jitter_s: float = 0.0  # extra Gaussian jitter of the reported stamps (not of the sampling)
+    gyro_scale_sigma: float = 0.01  # relative scale error of each gyro axis (1 sigma, clipped at 3)
+    misalignment_sigma_rad: float = 0.3 * _DEG  # IMU axes against the nominal T_rgb_imu, per axis (1 sigma)
+    time_offset_sigma_s: float = 0.0005  # IMU stamps minus the cameras' for the same instant (1 sigma)
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.gyro_rate_hz <= 10000.0:
@@ -71,7 +83,7 @@ class ImuModel:
             raise SimulationError(f"IMU rate_error_sigma must be in [0, 0.1], got {self.rate_error_sigma}")
         for name in ("gyro_noise_density", "accel_noise_density", "gyro_random_walk", "accel_random_walk",
                      "gyro_turn_on_bias_sigma", "accel_turn_on_bias_sigma", "gyro_range_rad_s", "accel_range_m_s2",
-                     "stamp_jitter_s"):
+                     "stamp_jitter_s", "gyro_scale_sigma", "misalignment_sigma_rad", "time_offset_sigma_s"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0.0):
                 raise SimulationError(f"IMU {name} must be finite and >= 0, got {v}")
@@ -89,7 +101,8 @@ class ImuModel:
         """Noise-free, bias-free, exact-rate, unclipped, unquantised model (tests, references)."""
         base = dict(rate_error_sigma=0.0, gyro_noise_density=0.0, accel_noise_density=0.0, gyro_random_walk=0.0,
                     accel_random_walk=0.0, gyro_turn_on_bias_sigma=0.0, accel_turn_on_bias_sigma=0.0,
-                    gyro_range_rad_s=0.0, accel_range_m_s2=0.0, gyro_bits=0, accel_bits=0, stamp_resolution_ns=1)
+                    gyro_range_rad_s=0.0, accel_range_m_s2=0.0, gyro_bits=0, accel_bits=0, stamp_resolution_ns=1,
+                    gyro_scale_sigma=0.0, misalignment_sigma_rad=0.0, time_offset_sigma_s=0.0)
         return cls(**{**base, **changes})
 
     def white_sigma(self, sensor: str, rate_hz: float | None = None) -> float:
@@ -132,11 +145,13 @@ class _Channel:
 
     def __init__(self, name: str, rate_hz: float, t_start_ns: int, t_end_ns: int, density: float, walk: float,
                  bias0: np.ndarray, range_: float, bits: int, model: ImuModel, seeds: list[np.random.SeedSequence],
-                 phase_frac: float) -> None:
+                 phase_frac: float, stamp_offset_ns: int = 0) -> None:
         self.name, self.rate_hz = name, rate_hz
+        self.stamp_offset_ns = int(stamp_offset_ns)  # reported minus true time (the calibration's residual)
         self.period_ns = 1e9 / rate_hz
-        # Times relative to the (int64) start: float64 cannot hold absolute ns stamps exactly.
-        self.t_start_ns = int(t_start_ns)
+        # Times relative to the (int64) start: float64 cannot hold absolute ns stamps exactly. The sensor samples
+        # the span shifted by its stamps' offset, so the reported stamps lie in the sequence's span.
+        self.t_start_ns = int(t_start_ns) - self.stamp_offset_ns
         self.offset_ns = phase_frac * self.period_ns
         span = t_end_ns - t_start_ns - self.offset_ns
         self.n_total = int(np.floor(span / self.period_ns)) + 1 if span >= 0 else 0
@@ -177,7 +192,7 @@ class _Channel:
             rel = rel + self.rng_stamp.standard_normal(n) * (self.model.stamp_jitter_s * 1e9)
         res = self.model.stamp_resolution_ns
         # The device clock ticks every ``res`` ns (absolute multiples of it).
-        stamps = self.t_start_ns + np.round(rel).astype(np.int64)
+        stamps = self.t_start_ns + self.stamp_offset_ns + np.round(rel).astype(np.int64)
         if res > 1:
             stamps = (stamps + res // 2) // res * res
         return stamps, y
@@ -207,21 +222,32 @@ class ImuSensor:
         phase = setup.uniform(0.0, 1.0, 2)
         b_gyro = setup.standard_normal(3) * model.gyro_turn_on_bias_sigma
         b_accel = setup.standard_normal(3) * model.accel_turn_on_bias_sigma
+        # The calibration's residuals, drawn after the rest so a seed's other draws stay what they were.
+        self.gyro_scale = 1.0 + np.clip(setup.standard_normal(3), -3.0, 3.0) * model.gyro_scale_sigma
+        self.R_nominal_true = so3_exp(setup.standard_normal(3) * model.misalignment_sigma_rad)
+        offset_ns = int(round(float(np.clip(setup.standard_normal(), -3.0, 3.0)) * model.time_offset_sigma_s * 1e9))
+        self.time_offset_ns = offset_ns
         self.united = bool(model.accel_rate_hz)
         self.gyro = _Channel("gyro", model.gyro_rate_hz * (1 + err[0]), t_start_ns, t_end_ns, model.gyro_noise_density,
                              model.gyro_random_walk, b_gyro, model.gyro_range_rad_s, model.gyro_bits, model,
-                             gyro_seed.spawn(3), phase[0])
+                             gyro_seed.spawn(3), phase[0], offset_ns)
         accel_rate = model.accel_rate_hz * (1 + err[1]) if self.united else self.gyro.rate_hz
         self.accel = _Channel("accel", accel_rate, t_start_ns, t_end_ns, model.accel_noise_density,
                               model.accel_random_walk, b_accel, model.accel_range_m_s2, model.accel_bits, model,
-                              accel_seed.spawn(3), phase[1] if self.united else phase[0])
+                              accel_seed.spawn(3), phase[1] if self.united else phase[0], offset_ns)
         self.turn_on_bias = {"gyro_rad_s": b_gyro, "accel_m_s2": b_accel}
 
+    def _measured(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rate (scaled per axis) and specific force on the sensor's true axes, turned off the nominal ones."""
+        omega, force = imu_kinematics(self.T_world_imu, t_ns, self.gravity)
+        R = self.R_nominal_true  # v_true = R^T v_nominal
+        return (omega @ R) * self.gyro_scale, force @ R
+
     def _omega(self, t_ns: np.ndarray) -> np.ndarray:
-        return imu_kinematics(self.T_world_imu, t_ns, self.gravity)[0]
+        return self._measured(t_ns)[0]
 
     def _force(self, t_ns: np.ndarray) -> np.ndarray:
-        return imu_kinematics(self.T_world_imu, t_ns, self.gravity)[1]
+        return self._measured(t_ns)[1]
 
     def describe(self) -> dict:
         """What this seed drew: actual sample rates and turn-on biases (for sequence.yaml)."""
@@ -229,7 +255,10 @@ class ImuSensor:
                 "accel_rate_hz": round(float(self.accel.rate_hz), 6),
                 "united": "linear_interpolation" if self.united else "same_clock",
                 "gyro_turn_on_bias_rad_s": [round(float(v), 9) for v in self.turn_on_bias["gyro_rad_s"]],
-                "accel_turn_on_bias_m_s2": [round(float(v), 9) for v in self.turn_on_bias["accel_m_s2"]]}
+                "accel_turn_on_bias_m_s2": [round(float(v), 9) for v in self.turn_on_bias["accel_m_s2"]],
+                "gyro_scale": [round(float(v), 9) for v in self.gyro_scale],
+                "misalignment_deg": round(float(np.degrees(np.linalg.norm(so3_log(self.R_nominal_true)))), 6),
+                "time_offset_s": self.time_offset_ns * 1e-9}
 
     def raw(self, sensor: str, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The next ``n`` raw samples of one sensor (``gyro`` or ``accel``) at its own stamps.
@@ -245,7 +274,7 @@ class ImuSensor:
             while self.gyro.next < self.gyro.n_total:
                 k0 = self.gyro.next
                 t_true = self.gyro.sample_times(k0, min(k0 + n_chunk, self.gyro.n_total))
-                omega, force = imu_kinematics(self.T_world_imu, t_true, self.gravity)
+                omega, force = self._measured(t_true)
                 stamps, gyro = self.gyro.take(len(t_true), lambda _t, w=omega: w)
                 _, accel = self.accel.take(len(t_true), lambda _t, f=force: f)
                 yield ImuBatch(stamps, gyro, accel)

@@ -30,7 +30,7 @@ import heapq
 import queue
 import threading
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -515,10 +515,18 @@ def _ahead(items: Iterator, depth: int = 4) -> Iterator:
         stop.set()
 
 
-def model_key() -> str:
+def spec_key(spec: SequenceSpec, imu: bool = True) -> str:
+    """``repr(spec)``, or with ``imu=False`` its fields but the IMU's (for what does not depend on the IMU)."""
+    if imu:
+        return repr(spec)
+    return ", ".join(f"{f.name}={getattr(spec, f.name)!r}" for f in fields(spec) if f.name != "imu_model")
+
+
+def model_key(imu: bool = True) -> str:
     """Identity of the simulator's models: ``m<MODEL_VERSION>-<hash of the default spec>``, so that a new model
-    version or a changed default (e.g. an ``EventModel`` parameter) never reuses a sequence generated before."""
-    digest = hashlib.sha1(f"{MODEL_VERSION}|{SequenceSpec()!r}".encode()).hexdigest()[:8]
+    version or a changed default (e.g. an ``EventModel`` parameter) never reuses a sequence generated before.
+    ``imu=False``: the identity of the camera streams alone (an IMU model's change leaves them as they are)."""
+    digest = hashlib.sha1(f"{MODEL_VERSION}|{spec_key(SequenceSpec(), imu)}".encode()).hexdigest()[:8]
     return f"m{MODEL_VERSION}-{digest}"
 
 
@@ -529,4 +537,4 @@ def make_simulation(spec: SequenceSpec, scene: Scene | None = None) -> Simulatio
 
 __all__ = ["DEPTH_MODELS", "MAX_DURATION_S", "MAX_RATE_HZ", "MAX_SEED", "MAX_TEXTURE_SIZE", "MIN_EVENT_PACKET_S",
            "FrameReport", "GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation",
-           "iter_sequence", "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig"]
+           "iter_sequence", "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig", "spec_key"]

@@ -261,3 +261,23 @@ def test_model_validation_and_sequence_options():
         ImuModel(stamp_jitter_s=1e-3)
     assert list(Simulation(SequenceSpec(scenario="trot", duration_s=0.2, imu=False)).imu()) == []
     assert list(Simulation(SequenceSpec(scenario="flying", duration_s=0.2, layout="mvsec")).imu()) == []
+
+
+def test_calibration_residuals_scale_turn_and_shift_the_samples():
+    """The gyro's scale, the IMU's axes and its clock are off by what the seed drew, as the odometry cannot know."""
+    ideal = ImuModel.ideal(accel_rate_hz=0.0)
+    off = dataclasses.replace(ideal, gyro_scale_sigma=0.01, misalignment_sigma_rad=np.radians(0.3),
+                              time_offset_sigma_s=0.0005)
+    ref, s = _sensor(ideal, _analytic_pose, 1.0, seed=3), _sensor(off, _analytic_pose, 1.0, seed=3)
+    a, b = ImuBatch.concatenate(list(ref.batches())), ImuBatch.concatenate(list(s.batches()))
+    d = s.describe()
+    assert 0.0 < d["misalignment_deg"] < 2.0 and 0 < abs(d["time_offset_s"]) <= 0.0015
+    assert all(0.97 <= k <= 1.03 for k in d["gyro_scale"]) and d["gyro_scale"] != [1.0, 1.0, 1.0]
+    # the same sampling instants (the ideal sensor has no offset: its stamps are the true times)
+    true_t = b.stamps_ns - s.time_offset_ns
+    omega, force = imu_kinematics(_analytic_pose, true_t, GRAVITY)
+    R = s.R_nominal_true
+    assert np.allclose(b.gyro_rad_s, (omega @ R) * s.gyro_scale, atol=1e-9)
+    assert np.allclose(b.accel_m_s2, force @ R, atol=1e-9)
+    assert b.t_first_ns >= START and b.t_last_ns <= START + 1_000_000_000  # stamps stay in the span
+    assert not np.allclose(a.gyro_rad_s[:50], b.gyro_rad_s[:50], atol=1e-3)
