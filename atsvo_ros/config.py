@@ -319,6 +319,22 @@ class TrackerConfig:
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")
+    gyro_prior_sigma_deg: float = _f(0.0, 0.0, 180.0,
+                                     doc="with an IMU, centre the motion prior's rotation on the gyro's rotation since "
+                                         "the last frame instead of the constant-rate prediction, with a sigma of "
+                                         "this (the gyro's offset and noise over a frame: 1 deg/s of uncalibrated "
+                                         "offset is 0.033 deg at 30 Hz), tracker.gyro_prior_relative_error x the "
+                                         "turn and the change of rate x tracker.gyro_prior_time_error_s, added in "
+                                         "quadrature; 0 = off (the gyro is then a first guess and a check only)")
+    gyro_prior_relative_error: float = _f(0.015, 0.0, 1.0,
+                                          doc="error of the gyro's rotation over a frame as a share of it: the gyro's "
+                                              "scale error and the IMU axes' misalignment with the colour camera "
+                                              "(a rotation off by e turns about an axis off by e): 1 % and 0.3 deg "
+                                              "per axis after calibration give ~0.012")
+    gyro_prior_time_error_s: float = _f(0.0005, 0.0, 0.1,
+                                        doc="error of the IMU's stamps against the colour camera's after calibration: "
+                                            "the gyro's window is shifted by it, which costs the change of rate over "
+                                            "the frame times it (a take-off's 300 deg/s over 0.5 ms: 0.15 deg)")
     motion_prior_huber: float = _f(2.0, 0.0, 100.0, lo_open=True,
                                    doc="Huber threshold of the motion prior (sigmas): beyond it the pull is constant")
     degraded_covariance_scale: float = _f(100.0, 1.0, 1e12, doc="factor on the covariance of a degraded frame")

@@ -84,5 +84,15 @@ class GyroBuffer:
             return None
         return float(np.linalg.norm(so3_log(R))) / max((t1_ns - t0_ns) * 1e-9, 1e-9)
 
+    def rate_change(self, t0_ns: int, t1_ns: int) -> float | None:
+        """How much the angular rate (rad/s) changed from ``t0_ns`` to ``t1_ns``: twice the difference of the mean
+        rates over the two halves (exact for a linear ramp); None as :meth:`rotation`."""
+        mid = (int(t0_ns) + int(t1_ns)) // 2
+        first, second = self.rotation(t0_ns, mid), self.rotation(mid, t1_ns)
+        if first is None or second is None or mid <= t0_ns:
+            return None
+        half_s = (mid - int(t0_ns)) * 1e-9
+        return 2.0 * float(np.linalg.norm(so3_log(second) - so3_log(first))) / half_s
+
 
 __all__ = ["GyroBuffer"]

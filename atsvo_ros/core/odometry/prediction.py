@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.core.geometry import camera_centre, rotation_angle_rad
 from atsvo_ros.core.odometry.gyro import GyroBuffer
 from atsvo_ros.core.odometry.inertial import CameraMotion, InertialPredictor
 from atsvo_ros.core.rolling_shutter import RollingShutter
@@ -79,16 +80,32 @@ class Predictor:
         a_m, a_rad = cfg.motion_prior_acceleration_m_s2, cfg.motion_prior_angular_acceleration_rad_s2
         spread = self.motion.prediction_spread(stamp) if a_m > 0 and a_rad > 0 else None
         if spread is not None:  # the last two poses are trusted
-            # The rotation stays constant velocity's even with a gyro (the gyro is a guess and a check); the centre
-            # is the accelerometer's when it has one. Node and replay give the core the same IMU samples (each
+            # The rotation is constant velocity's, or the gyro's with tracker.gyro_prior_sigma_deg; the centre is
+            # the accelerometer's when it has one. Node and replay give the core the same IMU samples (each
             # frame's cut ends at its exposure), so both track against the same prior.
             T_prior = self.motion.predict(stamp)
+            sigma_rad = a_rad * spread
+            if gyro is not None and cfg.gyro_prior_sigma_deg > 0:
+                c_w = camera_centre(T_prior)
+                T_prior[:3, :3] = gyro[:3, :3]
+                T_prior[:3, 3] = -gyro[:3, :3] @ c_w
+                sigma_rad = self._gyro_sigma_rad(stamp, gyro)
             if centre is not None:
                 T_prior[:3, 3] = -T_prior[:3, :3] @ centre
-            prior = MotionPrior(T_prior, a_m * spread, a_rad * spread, cfg.motion_prior_huber)
+            prior = MotionPrior(T_prior, a_m * spread, sigma_rad, cfg.motion_prior_huber)
         if check is None:
             return Priors(gyro, motion=prior)
         return Priors(gyro, check[0] if centre is None else centre, check[1], motion=prior)
+
+    def _gyro_sigma_rad(self, stamp: int, gyro: np.ndarray) -> float:
+        """How far the gyro's rotation since the last frame may be off: a floor (bias, noise), a share of the turn
+        (scale, axes) and the change of rate over the IMU's time error (a shifted window misses that much)."""
+        cfg = self.config.tracker
+        last_stamp, last_T = self.motion.last
+        turn_rad = float(rotation_angle_rad(gyro[:3, :3] @ last_T[:3, :3].T))
+        change = self.gyro.rate_change(last_stamp, stamp) or 0.0
+        return float(np.linalg.norm([np.radians(cfg.gyro_prior_sigma_deg), cfg.gyro_prior_relative_error * turn_rad,
+                                     change * cfg.gyro_prior_time_error_s]))
 
     def rolling_shutter(self, stamp: int) -> RollingShutter | None:
         """Row timing of the colour (and depth) image when the camera has a rolling shutter."""
