@@ -206,10 +206,11 @@ class Odometry:
         fused = self.tracking.uses_events(ev_frame)
         out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
         status = TrackingStatus.OK
-        if out.verdict.level != OK and self.mapping.busy():
+        if out.verdict.level != OK:
             # The camera outran the map while mapping still inserts a keyframe (asynchronous mapping behind):
-            # wait for that keyframe rather than relocalise against a map the camera has left.
-            newer = self.mapping.await_pending()
+            # wait for that keyframe rather than relocalise against a map the camera has left. A keyframe that
+            # mapping finished while this frame was tracked is taken too (it was not ready when the frame began).
+            newer = self.mapping.await_pending() if self.mapping.busy() else self.mapping.latest()
             if newer is not None:
                 self.tracking.set_snapshot(newer)
                 out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
