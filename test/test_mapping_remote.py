@@ -13,8 +13,7 @@ from atsvo_ros.core.frame import TrackingStatus
 from atsvo_ros.core.odometry.odometry import Odometry, RgbdFrame
 from atsvo_ros.errors import WireError
 from atsvo_ros.runtime.mapping_remote import MappingServer, RemoteMapping, mapping_digest
-from atsvo_ros.sim.sequence import RgbdFrame as SimFrame
-from atsvo_ros.sim.sequence import SequenceSpec, iter_sequence, sequence_rig
+from atsvo_ros.sim.sequence import SequenceSpec, make_simulation, sequence_rig
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +22,7 @@ def frames():
     # measured in test_odometry.py and the benchmark)
     spec = SequenceSpec(scenario="trot", duration_s=1.5, seed=0, width=160, height=120, event_scale=0.25,
                         depth="sharp")
-    items = [RgbdFrame(i.stamp_ns, i.rgb, i.depth_m) for i in iter_sequence(spec) if isinstance(i, SimFrame)]
+    items = [RgbdFrame(i.stamp_ns, i.rgb, i.depth_m) for i in make_simulation(spec).frames()]  # no events
     return load_config("synthetic", overrides={"mode": "rgbd"}), sequence_rig(spec).rgb_camera, items
 
 
