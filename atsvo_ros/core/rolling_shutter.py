@@ -5,6 +5,7 @@ exposure time with one constant camera twist per frame.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +26,8 @@ class RollingShutter:
     line_s: float
     T_prev_c_w: np.ndarray
     dt_s: float
+    #: the twist per second fixed whatever the estimate (:meth:`frozen`), or None: from the estimate
+    velocity_per_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_T_prev", np.ascontiguousarray(self.T_prev_c_w, dtype=np.float64))
@@ -35,9 +38,17 @@ class RollingShutter:
         """Readout over ``readout_s`` with the stamp at the middle row plus ``offset_s``."""
         return cls(offset_s - 0.5 * readout_s, readout_s / max(1, height_px), T_prev_c_w, dt_s)
 
+    def frozen(self, T_c_w: np.ndarray) -> RollingShutter:
+        """This timing with the velocity it has at ``T_c_w`` kept for any later estimate: a keyframe whose pose a
+        window optimisation moves keeps the motion it was seen with (its previous frame is not moved along)."""
+        vel = _twist_per_s(np.ascontiguousarray(T_c_w, dtype=np.float64), self._T_prev, float(self.dt_s))
+        return dataclasses.replace(self, velocity_per_s=np.ascontiguousarray(vel))
+
     def params(self, level: int, T_c_w: np.ndarray) -> tuple[np.ndarray, float, float]:
         """``(twist per second, t0, line time)`` for pixel rows of pyramid ``level`` at the estimate ``T_c_w``."""
-        vel = _twist_per_s(np.ascontiguousarray(T_c_w, dtype=np.float64), self._T_prev, float(self.dt_s))
+        vel = self.velocity_per_s
+        if vel is None:
+            vel = _twist_per_s(np.ascontiguousarray(T_c_w, dtype=np.float64), self._T_prev, float(self.dt_s))
         s = float(2 ** level)
         return np.ascontiguousarray(vel), self.t0_s + self.line_s * (0.5 * s - 0.5), self.line_s * s
 

@@ -22,6 +22,7 @@ from atsvo_ros.config import AtsvoConfig, flatten
 from atsvo_ros.core.mapping.map import MapSnapshot
 from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
 from atsvo_ros.core.mapping.ports import EventMapBuilder, EventMapsAhead
+from atsvo_ros.core.tracking.window import window_refiner
 from atsvo_ros.io.wire import (
     PinholeLevels,
     decode_keyframe_request,
@@ -198,7 +199,8 @@ class MappingServer:
             self._log("warn", "the tracking process runs other mapping/rgb_selection/rig parameters than this "
                               "mapping process: load the same parameter file in both")
         if self.mapper is None or wire.session != self.session or wire.camera != self._camera:
-            self.mapper = Mapper(self.config, wire.camera.cameras())
+            cameras = wire.camera.cameras()
+            self.mapper = Mapper(self.config, cameras, refiner=window_refiner(self.config, cameras))
             self.session, self._camera = wire.session, wire.camera
             self.n_sessions += 1
         t0 = time.perf_counter()

@@ -10,13 +10,14 @@ tracking reference), so tracking and mapping can run in one thread or in two.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from atsvo_ros.config import RigConfig
-from atsvo_ros.core.geometry import transform_points
+from atsvo_ros.core.geometry import se3_inv, transform_points
 from atsvo_ros.errors import TrackingError
 
 
@@ -151,6 +152,17 @@ class PointMap:
         self.geo_points_w = np.concatenate([self.geo_points_w, transform_points(kf.T_w_c, geo)])
         self.geo_host = np.concatenate([self.geo_host, np.full(len(geo), kf.kf_id, dtype=np.int32)])
         return kf
+
+    def move_keyframe(self, kf_id: int, T_w_c: np.ndarray) -> None:
+        """Put keyframe ``kf_id`` at ``T_w_c``; the points it hosts move with it (they keep their host-frame
+        coordinates)."""
+        kf = self.keyframes[kf_id]
+        T_new = np.asarray(T_w_c, dtype=np.float64).copy()
+        D = T_new @ se3_inv(kf.T_w_c)
+        for points, host in ((self.points_w, self.host), (self.geo_points_w, self.geo_host)):
+            mine = host == kf_id
+            points[mine] = transform_points(D, points[mine])
+        self.keyframes[kf_id] = dataclasses.replace(kf, T_w_c=T_new)
 
     def remove_points(self, remove: np.ndarray) -> int:
         """Drop photometric points where ``remove`` is True; returns how many were dropped."""

@@ -30,6 +30,7 @@ from atsvo_ros.core.mapping.map import (
     smoothed_depth,
     valid_depth_mask,
 )
+from atsvo_ros.core.mapping.refine import KeyframeView, WindowRefiner, WindowReport
 from atsvo_ros.core.mapping.rgb_selection import select_rgb_pixels
 from atsvo_ros.core.rolling_shutter import RollingShutter
 from atsvo_ros.errors import TrackingError
@@ -75,9 +76,14 @@ class EventMapRequest:
 class Mapper:
     """Owns the map; turns keyframe requests into snapshots (and event-map requests into event maps)."""
 
-    def __init__(self, config: AtsvoConfig, cameras: list[CameraModel], event_camera: CameraModel | None = None
-                 ) -> None:
+    def __init__(self, config: AtsvoConfig, cameras: list[CameraModel], event_camera: CameraModel | None = None,
+                 refiner: WindowRefiner | None = None) -> None:
         self.config = config
+        #: moves the keyframes of the local map after each insertion (None: keyframes keep their tracked poses)
+        self.refiner = refiner
+        #: what the last window optimisation did (None before the first, or without a refiner)
+        self.last_window: WindowReport | None = None
+        self._views: dict[int, KeyframeView] = {}  # per keyframe with photometric points: its image for the window
         self.event_camera = event_camera
         self.T_rgb_event = config.rig.T_rgb_event_matrix()
         self.camera = cameras[0]
@@ -97,6 +103,7 @@ class Mapper:
         mapping, sel = self.config.mapping, self.config.rgb_selection
         if req.reset:
             self._map = PointMap(self.n_levels, len(RGB_PATTERN))
+            self._views = {}
         elif req.snapshot_id == self.snapshot.snapshot_id and len(req.outlier_runs) == len(self._map):
             self._map.remove_points(req.outlier_runs >= mapping.max_outlier_frames)
         frame = req.frame
@@ -119,10 +126,16 @@ class Mapper:
                 p_c = req.rolling_shutter.to_stamp(p_c, uv[:, 1], req.T_c_w)
                 geo_c = req.rolling_shutter.to_stamp(geo_c, geo_uv[:, 1], req.T_c_w)
             patches = extract_patches(frame.pyramid, uv, RGB_PATTERN, affine)
-            self._map.add_keyframe(frame.stamp_ns, se3_inv(req.T_c_w), affine, p_c, patches, geo_c)
+            kf = self._map.add_keyframe(frame.stamp_ns, se3_inv(req.T_c_w), affine, p_c, patches, geo_c)
+            if self.refiner is not None and len(uv):  # a geometry-only keyframe's image did not hold its pose
+                rs = None if req.rolling_shutter is None else req.rolling_shutter.frozen(req.T_c_w)
+                self._views[kf.kf_id] = KeyframeView(frame, rs)
             self._map.cull(mapping.max_keyframes, mapping.max_points)
+            self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes}
             self.n_keyframes += 1
             added = len(uv)
+            if self.refiner is not None and len(uv):
+                self.last_window = self.refiner.refine(self._map, self._views)
         all_uv = np.concatenate([tracked_uv, uv.astype(np.float64)]) if added else tracked_uv
         ref = assess_health(all_uv, self.camera.width, self.camera.height, 1, mapping)
         self._snapshot_id += 1

@@ -53,6 +53,7 @@ from atsvo_ros.core.rolling_shutter import RollingShutter
 from atsvo_ros.core.tracking.checks import DEGRADED, OK, Priors, Verdict
 from atsvo_ros.core.tracking.motion import MotionModel
 from atsvo_ros.core.tracking.tracking import Tracking, TrackingOutcome, rotation_hypotheses
+from atsvo_ros.core.tracking.window import window_refiner
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,8 @@ class Odometry:
             event_cams = self.events.cameras
         T_event_rgb = se3_inv(config.rig.T_rgb_event_matrix())
         self.tracking = Tracking(config, self.cameras, event_cams, T_event_rgb)
-        self.mapper = Mapper(config, self.cameras, None if self.events is None else self.events.camera)
+        self.mapper = Mapper(config, self.cameras, None if self.events is None else self.events.camera,
+                             window_refiner(config, self.cameras))
         self.mapping: MappingPort = (mapping or InlineMapping)(self.mapper)
         #: The event front end's state between frames: event counts, the previous surface for the event map.
         self.event_side = EventSide(config, self.events, self.mapping)

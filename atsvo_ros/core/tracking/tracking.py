@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.config import AtsvoConfig, TrackerConfig
 from atsvo_ros.core.events.event_map import TemporaryEventMap
 from atsvo_ros.core.events.frontend import EventFrame
 from atsvo_ros.core.geometry import project_to_so3, se3_exp
@@ -62,6 +62,17 @@ def _mean_zncc(block: PhotometricBlock) -> float:
     inl = block.state == INLIER
     z = block.zncc[inl]
     return float(np.nanmean(z)) if np.isfinite(z).any() else float("nan")
+
+
+def rgb_block(cfg: TrackerConfig, points_w: np.ndarray, patches: np.ndarray, host_depth: np.ndarray,
+              frame: PreparedFrame, cameras: list, rolling_shutter: RollingShutter | None = None,
+              estimate_affine: bool = False) -> PhotometricBlock:
+    """The RGB term of Eq. 4: map points (world frame, patches of their hosts) against ``frame``'s colour pyramid."""
+    return PhotometricBlock(
+        "rgb", points_w, patches, RGB_PATTERN, frame.pyramid, cameras, weight=cfg.w_rgb, sigma=cfg.photometric_sigma,
+        huber=cfg.huber_delta, outlier=cfg.outlier_threshold, gradient_weight=cfg.gradient_weight,
+        estimate_affine=estimate_affine, coarse_points=cfg.coarse_level_points, zero_mean=cfg.zero_mean_patches,
+        ref_depth=host_depth, max_scale_change=cfg.max_scale_change, rolling_shutter=rolling_shutter)
 
 
 class Tracking:
@@ -121,13 +132,8 @@ class Tracking:
             # With zero-mean patches the gain is the frame's exposure relative to the map, measured from
             # patch means after the alignment, not fitted: blur lowers contrast, and a fitted gain
             # shrinks with it until the cost hardly depends on the pose.
-            out.append(PhotometricBlock(
-                "rgb", snap.points_w, snap.patches, RGB_PATTERN, frame.pyramid, self.cameras, weight=cfg.w_rgb,
-                sigma=cfg.photometric_sigma, huber=cfg.huber_delta, outlier=cfg.outlier_threshold,
-                gradient_weight=cfg.gradient_weight,
-                estimate_affine=cfg.affine_brightness and not cfg.zero_mean_patches,
-                coarse_points=cfg.coarse_level_points, zero_mean=cfg.zero_mean_patches, ref_depth=snap.host_depth,
-                max_scale_change=cfg.max_scale_change, rolling_shutter=rolling_shutter))
+            out.append(rgb_block(cfg, snap.points_w, snap.patches, snap.host_depth, frame, self.cameras,
+                                 rolling_shutter, estimate_affine=cfg.affine_brightness and not cfg.zero_mean_patches))
         if cfg.w_depth > 0 and len(snap.geo_points_w):
             out.append(GeometricBlock(
                 "depth", snap.geo_points_w, frame.depth_pyramid, self.cameras, weight=cfg.w_depth,
@@ -273,4 +279,4 @@ class Tracking:
         return (float(np.log(max(gain, 1e-3))), 0.0)
 
 
-__all__ = ["Tracking", "TrackingOutcome", "rotation_hypotheses"]
+__all__ = ["Tracking", "TrackingOutcome", "rgb_block", "rotation_hypotheses"]
