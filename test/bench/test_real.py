@@ -72,18 +72,23 @@ def test_bench_real_runs_ours_and_variants_and_writes_the_table(tmp_path):
                                       "--variant", "few:tracker.max_iterations=5", "--opencv", "rgbd"])
     assert args.open3d == [] and args.opencv == ["rgbd"]
     assert main(["real", str(folder), "--open3d", "--quiet", "--out", str(tmp_path / "o"),
-                 "--variant", "few:tracker.max_iterations=5", "--opencv", "rgbd"]) == 0
+                 "--variant", "few:tracker.max_iterations=5", "--opencv", "rgbd",
+                 "--variant", "window:mapping.window_iterations=2,mapping.min_tracked_fraction=0.99"]) == 0
     res = json.loads((tmp_path / "o" / "results.json").read_text())
     seq, = res["sequences"]
     assert seq["preset"] == "tum_fr1" and seq["frames"] == 5
     rows = {r["method"]: r for r in seq["rows"]}
-    assert set(rows) == {"atsvo_ros", "atsvo_ros:paper", "atsvo_ros:few", "opencv_rgbd"}
+    assert set(rows) == {"atsvo_ros", "atsvo_ros:paper", "atsvo_ros:few", "atsvo_ros:window", "opencv_rgbd"}
+    # the local window's time per keyframe: none by default, timed when on (a keyframe every frame here)
+    assert rows["atsvo_ros"]["window_ms"] is None and rows["opencv_rgbd"].get("window_ms") is None
+    assert rows["atsvo_ros:window"]["keyframes"] >= 3 and rows["atsvo_ros:window"]["window_ms"] > 0
     assert rows["atsvo_ros:few"]["overrides"] == {"tracker.max_iterations": 5}
     for r in rows.values():
         assert r["frames"] == 5 and r["n_matched"] == 5 and r["ms_median"] > 0 and r["ok"] >= 3
         assert r["ate_cm"] < 2.0  # tiny, exact-pose sequence: the row is the real thing, not a placeholder
     md = (tmp_path / "o" / "results.md").read_text()
     assert "| method | ATE cm | RPE deg/f | RPE deg/f interp | RPE cm/f | track ms med |" in md
+    assert "| window ms/kf |" in md
     assert "| atsvo_ros:few |" in md and "| opencv_rgbd |" in md and "## Definitions" in md
     assert (tmp_path / "o" / folder.name / "opencv_rgbd.tum").is_file()
     assert (tmp_path / "o" / folder.name / "atsvo_ros_few" / "trajectory.tum").is_file()

@@ -83,6 +83,9 @@ class Mapper:
         self.refiner = refiner
         #: what the last window optimisation did (None before the first, or without a refiner)
         self.last_window: WindowReport | None = None
+        #: window optimisations run and their total wall time (the benchmarks' mapping time per keyframe)
+        self.n_windows = 0
+        self.window_time_s = 0.0
         self._views: dict[int, KeyframeView] = {}  # per keyframe with photometric points: its image for the window
         self.event_camera = event_camera
         self.T_rgb_event = config.rig.T_rgb_event_matrix()
@@ -136,6 +139,8 @@ class Mapper:
             added = len(uv)
             if self.refiner is not None and len(uv):
                 self.last_window = self.refiner.refine(self._map, self._views)
+                self.n_windows += 1
+                self.window_time_s += self.last_window.time_s
         all_uv = np.concatenate([tracked_uv, uv.astype(np.float64)]) if added else tracked_uv
         ref = assess_health(all_uv, self.camera.width, self.camera.height, 1, mapping)
         self._snapshot_id += 1
