@@ -407,9 +407,9 @@ class MappingConfig:
     window_iterations: int = _f(0, 0, 50, doc="after each keyframe, Levenberg-Marquardt steps of the joint photometric "
                                 "optimisation of the local map's keyframe poses (each keyframe's image against the "
                                 "others' points, the oldest held; core/tracking/window.py); 0 = off. Opt-in: at 2, "
-                                "simulated trot / running 8 s 1.11 -> 0.70 / 2.64 -> 1.34 cm and TUM fr1_rpy_300 "
-                                "1.36 -> 1.20, but fr1_rpy every 4th / 5th frame from frame 3 1.56 -> 10.1 and "
-                                "2.30 -> 10.7 cm (docs/odometry.md)")
+                                "simulated trot / running 8 s 1.11 -> 0.63 / 2.64 -> 1.46 cm and TUM fr1_rpy_300 "
+                                "1.36 -> 1.20, but fr1_rpy every 5th frame from frame 3 2.30 -> 7.96 cm "
+                                "(docs/odometry.md)")
     synchronous: bool = _f(False, doc="ROS nodes: tracking waits for each keyframe it asks mapping for (what "
                            "atsvo-replay does, so node and replay agree pose for pose); false (default): tracking "
                            "goes on against the last map snapshot while mapping inserts the keyframe (PTAM)")

@@ -19,7 +19,7 @@ CAM = CameraModel(320, 240, 191.0, 191.0, 159.5, 119.5)
 #: true keyframe poses T_w_c: a camera moving 6 cm and turning 2 deg between keyframes
 TRUE = [se3_exp(np.array([0.06 * k, 0.01 * k, 0.0, 0.0, np.radians(2.0) * k, 0.0])) for k in range(3)]
 #: the error the newest keyframe is inserted with (4.9 mm, 0.30 deg): what tracking may leave on a keyframe (the
-#: window runs on the finest level only: from 1 cm / 0.6 deg, 2 px here, its first step overshoots to 2 cm)
+#: window runs on the finest level only: from 1 cm / 0.6 deg, 2 px here, see window.FIRST_DAMPING)
 ERROR = se3_exp(np.array([0.004, -0.002, 0.002, np.radians(0.2), 0.0, np.radians(0.22)]))
 
 
