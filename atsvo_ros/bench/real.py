@@ -114,6 +114,11 @@ def _timing(times_s: np.ndarray) -> dict[str, float]:
     return {"ms_median": float(np.median(t)), "ms_p95": float(np.percentile(t, 95)), "ms_mean": float(np.mean(t))}
 
 
+def _window_ms(mapper: Any) -> float | None:
+    """Mean wall time (ms) of the mapper's local window optimisations, None when it ran none."""
+    return mapper.window_time_s / mapper.n_windows * 1e3 if mapper.n_windows else None
+
+
 def run_ours(folder: Path, out_dir: Path, config: Any, progress: bool) -> dict[str, Any]:
     """Replay a TUM folder through our pipeline (rgbd) with ``config``; figures plus the raw outputs."""
 
@@ -167,7 +172,7 @@ def bench_folder(folder: Path, preset: str | None, base_overrides: dict[str, Any
                **score(gt, r["stamps_ns"], r["T_w_c"], r["ok"]), **_timing(r["times_s"]),
                "tracking_ms_median": float(np.median(r["tracking_s"][1:]) * 1e3), "ok": int(r["ok"].sum()),
                "frames": len(r["ok"]), "statuses": r["statuses"], "keyframes": r["keyframes"],
-               "window_ms": (r["mapper"].window_time_s / r["mapper"].n_windows * 1e3) if r["mapper"].n_windows else None}
+               "window_ms": _window_ms(r["mapper"])}
         seq["rows"].append(row)
         _print_row(row)
     rig = base.rig
