@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -47,11 +48,15 @@ def adjoint(T_a_b: np.ndarray) -> np.ndarray:
 FIRST_DAMPING = 1e-2
 
 
+@dataclass(frozen=True)
 class _Pair:
-    """The points hosted by one keyframe (host frame) against another keyframe's image."""
+    """The points hosted by one keyframe (``points_h``, host frame) against another keyframe's image (``block``,
+    whose world points are set from the host's pose at each linearisation)."""
 
-    def __init__(self, target: int, host: int, points_h: np.ndarray, block: PhotometricBlock) -> None:
-        self.target, self.host, self.points_h, self.block = target, host, points_h, block
+    target: int
+    host: int
+    points_h: np.ndarray
+    block: PhotometricBlock
 
 
 class WindowOptimiser:
@@ -85,6 +90,7 @@ class WindowOptimiser:
 
     def _pairs(self, point_map: PointMap, views: Mapping[int, KeyframeView], ids: list[int],
                T_c_w: dict[int, np.ndarray]) -> list[_Pair]:
+        """Every (target, host) pair of keyframes in ``ids``: the host's photometric points, the target's image."""
         cfg = self.config.tracker
         hosted = {h: point_map.host == h for h in ids}
         pairs = []
