@@ -113,6 +113,16 @@ def se3_log(T: np.ndarray) -> np.ndarray:
     return np.concatenate([rho, phi])
 
 
+def se3_adjoint(T: np.ndarray) -> np.ndarray:
+    """``Ad(T)`` (6x6) for twists with the translation first: ``exp(Ad(T) xi) = T exp(xi) T^-1``."""
+    R, t = T[:3, :3], T[:3, 3]
+    A = np.zeros((6, 6))
+    A[:3, :3] = R
+    A[:3, 3:] = hat(t) @ R
+    A[3:, 3:] = R
+    return A
+
+
 def se3_inv(T: np.ndarray) -> np.ndarray:
     """Inverse of a pose (or a stack of poses) without a general matrix inverse."""
     T = np.asarray(T, dtype=np.float64)

@@ -130,22 +130,26 @@ class Mapper:
                 geo_c = req.rolling_shutter.to_stamp(geo_c, geo_uv[:, 1], req.T_c_w)
             patches = extract_patches(frame.pyramid, uv, RGB_PATTERN, affine)
             kf = self._map.add_keyframe(frame.stamp_ns, se3_inv(req.T_c_w), affine, p_c, patches, geo_c)
-            if self.refiner is not None and len(uv):  # a geometry-only keyframe's image did not hold its pose
-                rs = None if req.rolling_shutter is None else req.rolling_shutter.frozen(req.T_c_w)
-                self._views[kf.kf_id] = KeyframeView(frame, rs)
             self._map.cull(mapping.max_keyframes, mapping.max_points)
-            self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes}
             self.n_keyframes += 1
             added = len(uv)
-            if self.refiner is not None and len(uv):
-                self.last_window = self.refiner.refine(self._map, self._views)
-                self.n_windows += 1
-                self.window_time_s += self.last_window.time_s
+            if self.refiner is not None and added:  # a geometry-only keyframe's image did not hold its pose
+                self._refine(kf.kf_id, KeyframeView(frame, None if req.rolling_shutter is None
+                                                    else req.rolling_shutter.frozen(req.T_c_w)))
         all_uv = np.concatenate([tracked_uv, uv.astype(np.float64)]) if added else tracked_uv
         ref = assess_health(all_uv, self.camera.width, self.camera.height, 1, mapping)
         self._snapshot_id += 1
         self.snapshot = self._map.snapshot(self._snapshot_id, max(1, ref.n_tracked), ref.healthy_regions)
         return self.snapshot
+
+    def _refine(self, kf_id: int, view: KeyframeView) -> None:
+        """Keep the new keyframe's image and run the window optimisation over the keyframes the map still holds."""
+        self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes}
+        if kf_id in self._map.keyframes:
+            self._views[kf_id] = view
+        self.last_window = self.refiner.refine(self._map, self._views)
+        self.n_windows += 1
+        self.window_time_s += self.last_window.time_s
 
     def build_event_map(self, req: EventMapRequest) -> TemporaryEventMap:
         """The temporary event map of Eq. 4 from one frame (:func:`atsvo_ros.core.events.event_map.build_event_map`)."""

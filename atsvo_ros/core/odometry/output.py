@@ -5,19 +5,9 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.frame import OdometryResult, TrackingStatus
-from atsvo_ros.core.geometry import hat, se3_inv
+from atsvo_ros.core.geometry import se3_adjoint, se3_inv
 from atsvo_ros.core.tracking.checks import OK
 from atsvo_ros.core.tracking.tracking import TrackingOutcome
-
-
-def _adjoint(T: np.ndarray) -> np.ndarray:
-    """Adjoint of a pose acting on twists (translation first)."""
-    R, t = T[:3, :3], T[:3, 3]
-    A = np.zeros((6, 6))
-    A[:3, :3] = R
-    A[3:, 3:] = R
-    A[:3, 3:] = hat(t) @ R
-    return A
 
 
 class ResultBuilder:
@@ -63,7 +53,7 @@ class ResultBuilder:
         if res is None:
             cov = np.eye(6) * 1e3  # no measurement: a large, honest uncertainty
         else:
-            A = _adjoint(self.T_base_rgb)
+            A = se3_adjoint(self.T_base_rgb)
             cov = A @ res.covariance @ A.T
             if status is TrackingStatus.DEGRADED and out.verdict.level != OK:  # doubted, not merely one-eyed
                 cov = cov * self.config.tracker.degraded_covariance_scale
