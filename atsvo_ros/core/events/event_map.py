@@ -15,7 +15,7 @@ from numba import njit
 
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events.frontend import EventFrame
-from atsvo_ros.core.geometry import transform_points
+from atsvo_ros.core.geometry import se3_inv, transform_points
 from atsvo_ros.core.image.photometric import ATS_PATTERN, extract_patches
 
 
@@ -94,17 +94,21 @@ def depth_in_camera(depth_m: np.ndarray, rgb_camera: CameraModel, camera: Camera
 
 
 def build_event_map(frame: EventFrame, depth_m: np.ndarray, rgb_camera: CameraModel, event_camera: CameraModel,
-                    T_w_rgb: np.ndarray, T_rgb_event: np.ndarray) -> TemporaryEventMap:
+                    T_w_rgb: np.ndarray, T_rgb_event: np.ndarray,
+                    T_depth_rgb: np.ndarray | None = None) -> TemporaryEventMap:
     """The temporary event map of ``frame`` (selected pixels with depth), in the world frame.
 
     ``depth_m`` is the colour-aligned depth of the same frame on ``rgb_camera``'s pinhole grid, ``T_w_rgb``
-    the colour camera's pose of that frame; both cameras are the pinhole (rectified) models.
+    the colour camera's pose of that frame; both cameras are the pinhole (rectified) models. A depth exposed
+    at another time (``T_depth_rgb``: that camera relative to the colour's) goes into the event camera in the
+    same one warp.
     """
     uv = np.asarray(frame.selected, dtype=np.int64).reshape(-1, 2)
     n_levels = len(frame.pyramid)
     if len(uv) == 0:
         return TemporaryEventMap.empty(n_levels, len(ATS_PATTERN))
-    zmap = depth_in_camera(depth_m, rgb_camera, event_camera, np.linalg.inv(T_rgb_event))
+    T_event_depth = se3_inv(T_rgb_event) if T_depth_rgb is None else se3_inv(T_depth_rgb @ T_rgb_event)
+    zmap = depth_in_camera(depth_m, rgb_camera, event_camera, T_event_depth)
     z = zmap[uv[:, 1], uv[:, 0]]
     ok = z > 0
     uv, z = uv[ok], z[ok].astype(np.float64)

@@ -15,6 +15,8 @@ import numpy as np
 
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.frame import RgbdFrame
+from atsvo_ros.core.geometry import se3_inv
+from atsvo_ros.core.image.depth_warp import warp_depth
 from atsvo_ros.core.image.pyramid import build_pyramid, depth_pyramid, image_pyramid_with_gradients, pyramid_cameras
 from atsvo_ros.errors import ImageError
 
@@ -95,6 +97,9 @@ class PreparedFrame:
     depth_pyramid: list[np.ndarray]  # float32 per level, 0 = invalid
     n_valid_depth: int
     contrast: float = 255.0  # standard deviation of the grey image (0-255) at 1/4 resolution
+    # The camera at the depth's exposure relative to the colour's (``X_depth = T_depth_rgb X_rgb``); None when the
+    # depth is at the colour's time. Tracking reads the depth where it was exposed; mapping moves it first.
+    T_depth_rgb: np.ndarray | None = None
 
     @property
     def grey(self) -> np.ndarray:
@@ -134,7 +139,20 @@ class RgbdFrontEnd(ImageFrontEnd):
         """``prepared`` with another depth image on the rectified grid (e.g. moved to the colour's time)."""
         dpyr = depth_pyramid(depth_m, self.n_levels, self.depth_edge_ratio, self.depth_min_m, self.depth_max_m)
         return dataclasses.replace(prepared, depth_m=depth_m, depth_pyramid=dpyr,
-                                   n_valid_depth=int(np.count_nonzero(dpyr[0])))
+                                   n_valid_depth=int(np.count_nonzero(dpyr[0])), T_depth_rgb=None)
+
+    def at_colour_time(self, prepared: PreparedFrame) -> PreparedFrame:
+        """``prepared`` with its depth image moved to the colour's time (itself when the depth is there already).
+
+        Tracking does not need this (its depth term reads the depth at its own exposure, ``T_depth_rgb``); a
+        keyframe or an event map does, as its points sit on colour pixels: the warp (1.8-2.5 ms at 640x480) and a
+        second depth pyramid are paid only then.
+        """
+        if prepared.T_depth_rgb is None:
+            return prepared
+        T_rgb_depth = se3_inv(prepared.T_depth_rgb)
+        return self.with_depth(prepared, warp_depth(prepared.depth_m, self.camera, T_rgb_depth[:3, :3],
+                                                    T_rgb_depth[:3, 3]))
 
 
 __all__ = ["ImageFrontEnd", "PreparedFrame", "RgbdFrontEnd", "to_grey", "usable_levels"]

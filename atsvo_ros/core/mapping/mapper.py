@@ -71,6 +71,7 @@ class EventMapRequest:
     depth_m: np.ndarray  # the colour-aligned depth of the same frame, on the colour camera's pinhole grid
     T_c_w: np.ndarray  # the colour camera's pose of that frame
     fired: np.ndarray | None = None
+    T_depth_rgb: np.ndarray | None = None  # where the depth was exposed (PreparedFrame.T_depth_rgb); None: at T_c_w
 
 
 class Mapper:
@@ -103,6 +104,9 @@ class Mapper:
         When the frame adds no point (no valid depth where the map has gaps), the snapshot is still
         renewed with the current health as reference, so the rule does not fire on every frame.
         """
+        if req.frame.T_depth_rgb is not None:
+            raise TrackingError("a keyframe's depth must be at its colour's time (RgbdFrontEnd.at_colour_time): "
+                                "its points sit on colour pixels")
         mapping, sel = self.config.mapping, self.config.rgb_selection
         if req.reset:
             self._map = PointMap(self.n_levels, len(RGB_PATTERN))
@@ -160,7 +164,7 @@ class Mapper:
         if req.fired is not None:
             frame = select_event_frame(frame, req.fired, self.config.event_selection)
         event_map = build_event_map(frame, req.depth_m, self.camera, self.event_camera, se3_inv(req.T_c_w),
-                                    self.T_rgb_event)
+                                    self.T_rgb_event, req.T_depth_rgb)
         return dataclasses.replace(event_map, build_time_s=time.perf_counter() - t0)
 
     def _covered(self, uv: np.ndarray, tracked_uv: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

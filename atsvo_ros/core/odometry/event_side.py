@@ -10,6 +10,7 @@ from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.events.event_map import TemporaryEventMap
 from atsvo_ros.core.events.frontend import EventFrame, EventFrontEnd
+from atsvo_ros.core.image.frontend import PreparedFrame
 from atsvo_ros.core.mapping.mapper import EventMapRequest
 from atsvo_ros.core.mapping.ports import MappingPort
 
@@ -32,8 +33,8 @@ class EventSide:
         self.frontend = frontend
         self.mapping = mapping
         self._time_s = 0.0  # ATS updates since the last frame (counted in its tracking time)
-        # the previous frame's event surface, depth and pose: what a temporary event map is built from
-        self._prev_event: tuple[EventFrame, np.ndarray, np.ndarray] | None = None
+        # the previous frame's event surface, colour frame (for its depth) and pose: its temporary event map's source
+        self._prev_event: tuple[EventFrame, PreparedFrame, np.ndarray] | None = None
         self._prev_request: EventMapRequest | None = None  # its event map, asked for ahead of the next frame
         self._since_frame = 0
         self._dropped_reported = 0  # the event front end's drop count at the last result
@@ -93,14 +94,15 @@ class EventSide:
 
     def _event_request(self) -> EventMapRequest:
         """The event-map request of the previous frame (mapping selects its pixels among those that fired)."""
-        ev_frame, depth, T_c_w = self._prev_event
-        return EventMapRequest(ev_frame, depth, T_c_w, self.frontend.recent_pixels(ev_frame.stamp_ns))
+        ev_frame, frame, T_c_w = self._prev_event
+        return EventMapRequest(ev_frame, frame.depth_m, T_c_w, self.frontend.recent_pixels(ev_frame.stamp_ns),
+                               frame.T_depth_rgb)
 
-    def remember(self, ev_frame: EventFrame, depth_m: np.ndarray, T_c_w: np.ndarray, fast: bool) -> None:
-        """Keep this frame's surface for the next frame's event map, and have it built now if that frame will
-        fuse (``fast``: the relative-motion factor of the poses so far, what the next frame tests): the build
-        then runs while tracking waits for the next frame, not after it arrives."""
-        self._prev_event = (ev_frame, depth_m, T_c_w)
+    def remember(self, ev_frame: EventFrame, frame: PreparedFrame, T_c_w: np.ndarray, fast: bool) -> None:
+        """Keep this frame's surface (and its colour frame's depth) for the next frame's event map, and have it
+        built now if that frame will fuse (``fast``: the relative-motion factor of the poses so far, what the next
+        frame tests): the build then runs while tracking waits for the next frame, not after it arrives."""
+        self._prev_event = (ev_frame, frame, T_c_w)
         self._prev_request = None
         if fast:
             self._prev_request = self._event_request()

@@ -6,6 +6,8 @@ previous frame), and for the previous frame once; a slow sequence never pays for
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
@@ -23,8 +25,11 @@ def rotation_between_deg(T_a: np.ndarray, T_b: np.ndarray) -> float:
 class FeatureAssist:
     """The previous trusted frame and, on demand, the feature-based pose of the current one."""
 
-    def __init__(self, config: AtsvoConfig, cameras: list[CameraModel]) -> None:
+    def __init__(self, config: AtsvoConfig, cameras: list[CameraModel],
+                 at_colour_time: Callable[[PreparedFrame], PreparedFrame]) -> None:
         cfg = config.tracker
+        # a frame's depth moved to its colour's time (RgbdFrontEnd.at_colour_time), needed only when it is described
+        self.at_colour_time = at_colour_time
         self.enabled = cfg.feature_check_deg > 0
         self.check_deg = cfg.feature_check_deg
         self.level = min(cfg.feature_level, len(cameras) - 1)
@@ -37,6 +42,7 @@ class FeatureAssist:
 
     def _features(self, frame: PreparedFrame) -> FrameFeatures:
         self.n_described += 1
+        frame = self.at_colour_time(frame)
         if self.level == 0:
             return self.matcher.describe(frame.grey, frame.depth_m)
         return self.matcher.describe(frame.pyramid[self.level][..., 0], frame.depth_pyramid[self.level])

@@ -30,12 +30,14 @@ class MotionModel:
     def __init__(self) -> None:
         self._history: deque[tuple[int, np.ndarray]] = deque(maxlen=2)
         self._trusted: deque[bool] = deque(maxlen=2)
+        self._twist: tuple[np.ndarray, int] | None = None  # the last motion's twist (computed once per push)
 
     def reset(self) -> None:
         """Forget the motion (after a clock jump or a re-initialisation the velocity is unknown)."""
         last = self._history[-1] if self._history else None
         self._history.clear()
         self._trusted.clear()
+        self._twist = None
         if last is not None:
             self._history.append(last)
             self._trusted.append(False)
@@ -45,6 +47,7 @@ class MotionModel:
         the published trajectory continues from either."""
         self._history.append((int(stamp_ns), np.asarray(T_c_w, dtype=np.float64).copy()))
         self._trusted.append(bool(trusted))
+        self._twist = None
 
     def centre_prior(self, stamp_ns: int, max_acceleration_m_s2: float,
                      noise_m: float) -> tuple[np.ndarray, float] | None:
@@ -90,8 +93,10 @@ class MotionModel:
         """Twist of the last inter-frame motion (``T1 T0^-1``) and its duration in ns."""
         if len(self._history) < 2:
             return None
-        (s0, T0), (s1, T1) = self._history
-        return se3_log(T1 @ se3_inv(T0)), max(1, s1 - s0)
+        if self._twist is None:  # predictions ask for it several times per frame
+            (s0, T0), (s1, T1) = self._history
+            self._twist = (se3_log(T1 @ se3_inv(T0)), max(1, s1 - s0))
+        return self._twist
 
     def twist_per_s(self) -> np.ndarray:
         """Velocity of the last inter-frame motion as a twist per second (``T(t + dt) = exp(dt xi) T(t)``).

@@ -136,7 +136,8 @@ class Tracking:
                                  rolling_shutter, estimate_affine=cfg.affine_brightness and not cfg.zero_mean_patches))
         if cfg.w_depth > 0 and len(snap.geo_points_w):
             out.append(GeometricBlock(
-                "depth", snap.geo_points_w, frame.depth_pyramid, self.cameras, weight=cfg.w_depth,
+                "depth", snap.geo_points_w, frame.depth_pyramid, self.cameras,
+                T_cam_rgb=np.eye(4) if frame.T_depth_rgb is None else frame.T_depth_rgb, weight=cfg.w_depth,
                 sigma_at_1m_m=cfg.depth_sigma_at_1m_m, sigma_min_m=cfg.depth_sigma_min_m, huber=cfg.depth_huber,
                 outlier=cfg.depth_outlier, edge_ratio=self.config.mapping.depth_edge_ratio,
                 coarse_points=cfg.coarse_level_points))

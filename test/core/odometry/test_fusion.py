@@ -58,6 +58,28 @@ def _frames(room, dt_ns: int):
     return f0, f1, build_event_map(f0, depth_rgb, RGB, EV, _T_w_rgb(0), T_RGB_EVENT), fe.cameras
 
 
+def test_an_event_map_from_depth_exposed_earlier_places_its_points_at_their_depth():
+    """A D455 exposes depth up to 16 ms off the colour: given where the depth was exposed (``T_depth_rgb``), the
+    event map's points land at the event camera's true depth (measured 0.007 % median error, as from depth at the
+    colour's time); read as if exposed with the colour, 1.3-1.7 % off and 29-42 % of them more than 2 %."""
+    room = BoxRoom(seed=4)
+    f0, _, _, _ = _frames(room, 33 * MS)
+    truth = room.render_depth(EV, _T_w_ev(0))
+
+    def rel_err(event_map):
+        p = transform_points(se3_inv(_T_w_ev(0)), event_map.points_w)
+        u, v = np.rint(EV.project(p)[0]).astype(int).T
+        return np.abs(p[:, 2] - truth[v, u]) / truth[v, u]
+
+    t_d = -12 * MS
+    depth_d = room.render_depth(RGB, _T_w_rgb(t_d))
+    T_depth_rgb = se3_inv(_T_w_rgb(t_d)) @ _T_w_rgb(0)
+    placed = rel_err(build_event_map(f0, depth_d, RGB, EV, _T_w_rgb(0), T_RGB_EVENT, T_depth_rgb))
+    stale = rel_err(build_event_map(f0, depth_d, RGB, EV, _T_w_rgb(0), T_RGB_EVENT))
+    assert len(placed) > 300 and np.median(placed) < 1e-3 and (placed > 0.02).mean() < 0.01
+    assert np.median(stale) > 0.01 and (stale > 0.02).mean() > 0.2  # the scene this test runs on shows it
+
+
 @pytest.fixture(scope="module")
 def event_frames():
     """ATS of the event camera at 0 and 33 ms of a fast turn, and the event map of the first."""
