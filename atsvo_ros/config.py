@@ -362,6 +362,14 @@ class FusionConfig:
                                          "300 against 8.2 at 150 (seed 2: 7.7 -> 28.7, the others within 1.1); trot "
                                          "and pronk never reach it. On the old sharp depth 300 was better (bound "
                                          "0.99-1.38 cm against 1.23-2.59): RGB-D alone held the bound there")
+    rate_threshold_gyro_deg_s: float = _f(220.0, 0.0, 10000.0,
+                                          doc="the same gate when the gyro measured the rate (an IMU fed): its "
+                                              "rotation puts RGB-D's alignment in its basin at higher rates, and the "
+                                              "event term joining earlier cost the bounds. Measured 27 Nov 2026 "
+                                              "(640x480, 2.5 s, IMU fed, tuning seeds 0-9, mean ATE cm at 150 / 190 "
+                                              "/ 220 / 300): bound 2.75 / 1.77 / 1.66 / 1.81 (RGB-D alone 1.70), "
+                                              "backflip 7.25 / 7.51 / 7.49 / 7.46 (seed 2 2.9 -> 11.7, seed 3 24.2 "
+                                              "-> 18.6 from 190 up); running, trot, pronk unchanged")
     speed_threshold_m_s: float = _f(5.0, 0.0, 100.0,
                                     doc="camera speed over the last two frames above which the event term is used. "
                                         "Translation at v blurs a surface at depth Z as a turn at v / Z rad/s does: "

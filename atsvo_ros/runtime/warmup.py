@@ -90,7 +90,8 @@ def warm_up(config: AtsvoConfig, use_events: bool = True, seed: int = 0) -> Warm
         the frames' statuses and modes.
     """
     t0 = time.perf_counter()
-    fusion = dataclasses.replace(config.fusion, rate_threshold_deg_s=0.0, speed_threshold_m_s=0.0)
+    fusion = dataclasses.replace(config.fusion, rate_threshold_deg_s=0.0, rate_threshold_gyro_deg_s=0.0,
+                                 speed_threshold_m_s=0.0)
     cfg = dataclasses.replace(config, fusion=fusion)
     rgb_cam = CameraModel.from_config(cfg.rgb_camera)
     ev_cam = CameraModel.from_config(cfg.event_camera)

@@ -121,6 +121,11 @@ class Predictor:
         The angular rate comes from the gyro when it covers the interval (measured, not estimated), else
         from the two poses; None before two frames.
         """
+        measured = self._measured_rates()
+        return None if measured is None else measured[:2]
+
+    def _measured_rates(self) -> tuple[float, float, bool] | None:
+        """:meth:`motion_rates` and whether the gyro gave the angular rate."""
         rel = self.motion.relative_motion()
         if rel is None:
             return None
@@ -129,15 +134,18 @@ class Predictor:
         if len(hist) == 2:
             rate = self.gyro.angular_rate(hist[0][0], hist[1][0])
             if rate is not None:
-                ang = rate
-        return ang, speed
+                return rate, speed, True
+        return ang, speed, False
 
     def is_fast(self) -> bool:
-        """The relative-motion factor of the last two frames is above a threshold (angular rate or speed)."""
-        rates = self.motion_rates()
+        """The relative-motion factor of the last two frames is above a threshold (angular rate or speed); the
+        rate's threshold is ``fusion.rate_threshold_gyro_deg_s`` when the gyro measured it."""
+        rates = self._measured_rates()
+        if rates is None:
+            return False
         fu = self.config.fusion
-        return rates is not None and (np.degrees(rates[0]) > fu.rate_threshold_deg_s
-                                      or rates[1] > fu.speed_threshold_m_s)
+        limit = fu.rate_threshold_gyro_deg_s if rates[2] else fu.rate_threshold_deg_s
+        return bool(np.degrees(rates[0]) > limit or rates[1] > fu.speed_threshold_m_s)
 
 
 __all__ = ["Predictor"]
