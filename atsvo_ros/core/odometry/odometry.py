@@ -187,7 +187,7 @@ class Odometry:
                 self.depth_timing.reset()
         predicted = self.motion.predict(stamp)
         raw = prepared
-        prepared, moved = self._depth_at_colour_time(raw, stamp)
+        prepared, moved = self._place_depth(raw, stamp)
         ev_frame = self.event_side.render(stamp, n_events)  # None while the event camera is silent
         if not self.tracking.has_map:
             self.event_side.end_frame(n_events)
@@ -285,7 +285,7 @@ class Odometry:
         if self.depth_timing is not None and trusted:
             self.depth_timing.observe(stamp, T_c_w)
 
-    def _depth_at_colour_time(self, prepared: PreparedFrame, stamp: int) -> tuple[PreparedFrame, bool]:
+    def _place_depth(self, prepared: PreparedFrame, stamp: int) -> tuple[PreparedFrame, bool]:
         """Place a depth image exposed ``rig.depth_time_offset_s`` off the colour: the camera's pose at its exposure.
 
         The gyro gives the rotation between the two exposures; with ``tracker.depth_time_translation`` the
@@ -331,14 +331,14 @@ class Odometry:
         """
         anchor, self._anchor = self._anchor, None
         offset_ns = int(round(self.config.rig.depth_time_offset_s * 1e9))
-        request = Tracking.reset_request(self.frontend.at_colour_time(prepared), T_c_w)
+        frame, T_frame_w = prepared, T_c_w
         oldest = self.depth_timing.oldest_ns if self.depth_timing is not None else None
         if anchor is not None and oldest is not None and anchor.stamp_ns >= oldest:
             T_a_d = self._depth_motion(anchor.stamp_ns, offset_ns)
             if T_a_d is not None:
-                moved = dataclasses.replace(anchor.raw, T_depth_rgb=se3_inv(T_a_d))
-                request = Tracking.reset_request(self.frontend.at_colour_time(moved), anchor.T_c_w)
-        return self._insert(request)
+                frame = dataclasses.replace(anchor.raw, T_depth_rgb=se3_inv(T_a_d))
+                T_frame_w = anchor.T_c_w
+        return self._insert(Tracking.reset_request(self.frontend.at_colour_time(frame), T_frame_w))
 
     def _turn_anchor(self) -> None:
         """Rebuild the map from its first frame once the gyro covers that frame's depth offset (before tracking).
@@ -349,7 +349,7 @@ class Odometry:
         6-7 cm off.
         """
         anchor = self._anchor
-        turned, moved = self._depth_at_colour_time(anchor.raw, anchor.stamp_ns)
+        turned, moved = self._place_depth(anchor.raw, anchor.stamp_ns)
         done = None if moved or self.depth_timing is None else dataclasses.replace(anchor, turned=True)
         if turned is anchor.raw:
             if self.gyro:  # the samples came, but too late to reach it (30 ms): the map stays, no more tries
