@@ -294,16 +294,16 @@ class TrackerConfig:
     motion_prior_angular_acceleration_rad_s2: float = _f(
         32.0, 0.0, 1e5, doc="typical angular acceleration for the motion prior's rotation sigma (same formula: "
         "2 deg at 30 fps). In flight the body keeps its angular momentum (simulated backflips: the constant-rate "
-        "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. The rotation is "
-        "centred on the constant-rate prediction even with a gyro (the gyro is a guess and a check); the centre on "
-        "the accelerometer's prediction with tracker.imu_translation; 0 = no prior")
-    imu_translation: bool = _f(False, doc="with an IMU, the camera centre's prediction (the first guess, the motion "
+        "prediction is 0.1-0.7 deg off); a landing's 9 deg is left to the data by the Huber kernel. With a gyro the "
+        "rotation is centred on the gyro's instead (tracker.gyro_prior_sigma_deg), the centre on the "
+        "accelerometer's prediction (tracker.imu_translation); 0 = no prior")
+    imu_translation: bool = _f(True, doc="with an IMU, the camera centre's prediction (the first guess, the motion "
                                "prior's centre and the constant-velocity check's) integrates the accelerometer from "
                                "the last trusted velocity instead of assuming constant velocity; gravity is "
-                               "estimated while tracking. A push-off's 4 g is what constant velocity misses. Off: "
-                               "tuning seeds 0-4 (2.4 s backflip, IMU fed, mean ATE on / off) gained (fused 6.73 / "
-                               "8.94 cm, RGB-D 17.45 / 29.70), held-out seeds 100-102 (10 s) did not (fused "
-                               "backflip 6.91 / 5.72, bound 13.24 / 13.59, trot 1.44 / 1.34; docs/odometry.md)")
+                               "estimated while tracking. A push-off's 4 g is what constant velocity misses. "
+                               "Earns its place with the gyro's prior (tracker.gyro_prior_sigma_deg): tuning seeds "
+                               "0-9, 2.5 s, 640x480, fused + IMU, backflip mean ATE both 4.39 cm, prior alone 9.69, "
+                               "accelerometer alone 10.76, neither 7.49 (docs/odometry.md)")
     depth_time_translation: bool = _f(True, doc="when depth is moved to the colour's time (rig.depth_time_offset_s, "
                                       "with an IMU), move it by the camera's translation over the offset as well as "
                                       "by the gyro's rotation (a bound's 2 m/s over 16 ms is 3 cm of depth): the "
@@ -319,13 +319,15 @@ class TrackerConfig:
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")
-    gyro_prior_sigma_deg: float = _f(0.0, 0.0, 180.0,
+    gyro_prior_sigma_deg: float = _f(0.1, 0.0, 180.0,
                                      doc="with an IMU, centre the motion prior's rotation on the gyro's rotation since "
                                          "the last frame instead of the constant-rate prediction, with a sigma of "
                                          "this (the gyro's offset and noise over a frame: 1 deg/s of uncalibrated "
                                          "offset is 0.033 deg at 30 Hz), tracker.gyro_prior_relative_error x the "
                                          "turn and the change of rate x tracker.gyro_prior_time_error_s, added in "
-                                         "quadrature; 0 = off (the gyro is then a first guess and a check only)")
+                                         "quadrature (mid-flip the share of the turn dominates: ~0.3 deg); 0 = off "
+                                         "(the gyro is then a first guess and a check only). With "
+                                         "tracker.imu_translation: see there")
     gyro_prior_relative_error: float = _f(0.015, 0.0, 1.0,
                                           doc="error of the gyro's rotation over a frame as a share of it: the gyro's "
                                               "scale error and the IMU axes' misalignment with the colour camera "

@@ -1,4 +1,4 @@
-"""The motion prior's rotation: constant rate by default, the gyro's with tracker.gyro_prior_sigma_deg."""
+"""The motion prior's rotation: the gyro's with an IMU (tracker.gyro_prior_sigma_deg), constant rate when that is 0."""
 from __future__ import annotations
 
 import numpy as np
@@ -48,7 +48,7 @@ def test_the_prior_turns_with_the_gyro_only_when_asked(sigma_deg: float) -> None
         assert off_gyro < 1e-9 and off_cv > 9.0
         turn = np.radians(300.0) * 0.033  # 300 deg/s over 33 ms
         expected = np.hypot(np.radians(0.1), 0.015 * turn)  # a constant rate: the time error costs nothing
-        assert prior.sigma_rad == pytest.approx(expected, rel=0.01)  # 0.18 deg: tighter than the 2 deg default
+        assert prior.sigma_rad == pytest.approx(expected, rel=0.01)  # 0.18 deg: tighter than the constant rate's 2 deg
 
 
 def test_the_gyros_rate_change_is_measured_over_a_frame() -> None:
