@@ -57,28 +57,26 @@ def bound_runs(tmp_path_factory):
     return _runs(tmp_path_factory, "bound", ({"mode": "rgbd"},), scenario="bound", seed=0, duration_s=2.5)
 
 
-@pytest.fixture(scope="module")
-def robot_bound(tmp_path_factory):
-    """The bound at the D455's 640x480, fused, the IMU fed (the robot's configuration)."""
+def _robot_run(tmp_path_factory, scenario: str, seed: int) -> dict:
+    """A 2.5 s sequence at the D455's 640x480, fused, the IMU fed (the robot's configuration)."""
     mp = pytest.MonkeyPatch()
-    mp.setenv("ATSVO_CACHE", str(tmp_path_factory.mktemp("bound640")))
+    mp.setenv("ATSVO_CACHE", str(tmp_path_factory.mktemp(f"{scenario}640")))
     try:
-        return run_sequence(scenario="bound", seed=0, duration_s=2.5, width=640, height=480, progress=False,
+        return run_sequence(scenario=scenario, seed=seed, duration_s=2.5, width=640, height=480, progress=False,
                             use_events=True, use_imu=True)
     finally:
         mp.undo()
+
+
+@pytest.fixture(scope="module")
+def robot_bound(tmp_path_factory):
+    return _robot_run(tmp_path_factory, "bound", 0)
 
 
 @pytest.fixture(scope="module")
 def robot_flip(tmp_path_factory):
-    """A backflip at the D455's 640x480, fused, the IMU fed (seed 3: the tuning seed whose flight coasted furthest)."""
-    mp = pytest.MonkeyPatch()
-    mp.setenv("ATSVO_CACHE", str(tmp_path_factory.mktemp("flip640")))
-    try:
-        return run_sequence(scenario="backflip", seed=3, duration_s=2.5, width=640, height=480, progress=False,
-                            use_events=True, use_imu=True)
-    finally:
-        mp.undo()
+    # seed 3: the tuning seed whose flight coasted furthest
+    return _robot_run(tmp_path_factory, "backflip", 3)
 
 
 def test_fused_holds_the_flip_where_rgbd_alone_does_not(flip_runs):
