@@ -89,6 +89,12 @@ def read_sim_description(path: Path) -> dict[str, Any] | None:
     return doc if isinstance(doc, dict) and doc.get("generator") == "atsvo-sim" else None
 
 
+def sim_depth_phase_s(description: dict[str, Any] | None) -> float | None:
+    """The simulated D455's drawn depth-against-colour exposure offset (s) from a ``sequence.yaml``, or None."""
+    phase_s = ((description or {}).get("models") or {}).get("depth", {}).get("phase_s_this_seed")
+    return None if phase_s is None else float(phase_s)
+
+
 def detect_preset(topics: dict[str, str]) -> str:
     """``mvsec`` for MVSEC topic names, else ``mini_cheetah`` (the robot and the simulator's layout)."""
     return "mvsec" if any(t.startswith("/davis/left/") for t in topics) else "mini_cheetah"
@@ -175,7 +181,7 @@ class BagSource:
     def setup(self, config: AtsvoConfig, notes: list[str]) -> tuple[AtsvoConfig, CameraModel, CameraModel]:
         first = self.bag.first_messages(["rgb", "rgb_info", "event_info", "tf_static", "events", "imu"])
         config = _extrinsics(config, self.bag, first, notes)
-        phase_s = ((self.sim or {}).get("models") or {}).get("depth", {}).get("phase_s_this_seed")
+        phase_s = sim_depth_phase_s(self.sim)
         if phase_s and config.rig.depth_time_offset_s != phase_s:
             # said, not applied: the gyro-only turn helps flips and hurts bounds (docs/simulator.md)
             notes.append(f"sequence.yaml: the simulated D455 exposes depth {float(phase_s) * 1e3:+.1f} ms off colour; "

@@ -313,7 +313,7 @@ def test_real_event_bags_stream_every_event(realdata, rel, n_events):
 def test_an_atsvo_sim_bag_names_its_preset_and_its_depth_phase(trot_3s_bag, tmp_path):
     """sequence.yaml picks the synthetic preset (not the robot's) and the D455 phase is said, not applied."""
     from atsvo_ros.config import load_config
-    from atsvo_ros.io.sources import open_source, read_sim_description
+    from atsvo_ros.io.sources import open_source, read_sim_description, sim_depth_phase_s
 
     source = open_source([trot_3s_bag], None, None)
     try:
@@ -321,9 +321,12 @@ def test_an_atsvo_sim_bag_names_its_preset_and_its_depth_phase(trot_3s_bag, tmp_
         notes: list[str] = []
         config, *_ = source.setup(load_config("synthetic"), notes)
         assert config.rig.depth_time_offset_s == 0.0
-        assert any("--set rig.depth_time_offset_s=" in n for n in notes), notes
+        phase_s = sim_depth_phase_s(read_sim_description(trot_3s_bag))  # what atsvo-bench nodes sets
+        assert phase_s is not None and 0.0 < abs(phase_s) <= 1 / 60
+        assert any(f"--set rig.depth_time_offset_s={phase_s:g}" in n for n in notes), notes
     finally:
         source.close()
+    assert sim_depth_phase_s(None) is None and sim_depth_phase_s({"models": {}}) is None
     assert read_sim_description(tmp_path) is None  # no sequence.yaml: chosen from the topics as before
     (tmp_path / "sequence.yaml").write_text("generator: [unclosed")
     with pytest.raises(BagError, match="not readable YAML"):
