@@ -75,6 +75,12 @@ class RigConfig:
     sync_tolerance_s: float = _f(0.01, 0.0, 1.0, doc="max RGB/depth stamp difference for a pair")
     imu_time_offset_s: float = _f(0.0, -1e4, 1e4, doc="added to the IMU stamps to put them on the colour images' "
                                   "clock (an IMU on another clock; the run says so at its start and names the value)")
+    imu_accel_range_m_s2: float = _f(4.0 * 9.80665, 0.0, 1e4,
+                                     doc="the accelerometer's range: a sample at it is clipped (the D4xx firmware "
+                                         "sets the BMI055 to +-4 g, librealsense PR #2777; a push-off or landing "
+                                         "exceeds it). Over a span with a clipped sample the accelerometer's "
+                                         "prediction is not held as measured (tracker.imu_prior_sigma_m); 0 = "
+                                         "never clipped")
     depth_time_offset_s: float = _f(0.0, -0.1, 0.1,
                                     doc="depth exposure centre minus colour exposure centre, for a depth image "
                                         "registered to colour and stamped with it: a D455 cannot synchronise the "
@@ -308,14 +314,25 @@ class TrackerConfig:
                                       "with an IMU), move it by the camera's translation over the offset as well as "
                                       "by the gyro's rotation (a bound's 2 m/s over 16 ms is 3 cm of depth): the "
                                       "IMU's velocity fitted over the trusted poses of "
-                                      "tracker.depth_velocity_window_s, and the map rebuilt from its first frame "
+                                      "tracker.imu_velocity_window_s, and the map rebuilt from its first frame "
                                       "once that velocity exists. Tuning seeds 0-4 (2.4-2.5 s, 320x240, IMU fed, "
                                       "mean ATE on / off): bound RGB-D 3.97 / 6.20 cm, fused 4.80 / 5.61; backflip "
                                       "fused 8.12 / 8.39 (docs/odometry.md)")
-    depth_velocity_window_s: float = _f(0.15, 0.03, 2.0, doc="span of the trusted poses the IMU's velocity is fitted "
-                                        "to for tracker.depth_time_translation (at least 3): longer averages more pose "
-                                        "noise, shorter lets less of the accelerometer's bias in (the BMI055's 70 mg "
-                                        "over 0.15 s: under 1 mm of depth)")
+    imu_velocity_window_s: float = _f(0.15, 0.03, 2.0,
+                                      doc="span of the trusted poses the IMU's velocity is fitted to (at least 3), "
+                                          "for the depth's timing (tracker.depth_time_translation) and the "
+                                          "accelerometer's prediction (tracker.imu_translation): longer averages "
+                                          "more pose noise, shorter lets less of the accelerometer's bias in (the "
+                                          "BMI055's 70 mg over 0.15 s: under 1 mm)")
+    imu_prior_sigma_m: float = _f(0.0, 0.0, 1.0,
+                                  doc="opt-in (0 = off): the accelerometer's prediction starts from the IMU velocity "
+                                      "fitted over tracker.imu_velocity_window_s instead of the last two poses', and "
+                                      "where the accelerometer measured the whole span unclipped "
+                                      "(rig.imu_accel_range_m_s2) the motion prior's centre gets this sigma instead "
+                                      "of constant velocity's reach (2.2 cm); 0.003 is about the trusted poses' own "
+                                      "noise. Tuning seeds 0-9 (2.5 s, 640x480, fused + IMU) backflip mean ATE 4.39 "
+                                      "-> 3.18 cm at 0.003, but held-out seeds 100-102 (10 s) 4.20 -> 5.30, bound "
+                                      "2.65 -> 2.32 (docs/odometry.md)")
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")

@@ -2,9 +2,9 @@
 
 Constant velocity misses a Mini-Cheetah's push-off (up to 4 g for ~0.1 s) by 13-61 cm over the frames the
 camera is blurred; the specific force integrated from the last trusted velocity predicted the same frames to
-2.4-2.6 cm (simulated backflips, seed 21). Per frame: the IMU's velocity at the last frame from the last two
-trusted poses and what the IMU measured between them, then its position at the new stamp, the IMU's rotation
-from the gyro.
+2.4-2.6 cm (simulated backflips, seed 21). Per frame: the IMU's velocity at the last frame, fitted to the
+trusted poses of a short window (:mod:`~atsvo_ros.core.odometry.imu_state`) or else from the last two poses and
+what the IMU measured between them, then its position at the new stamp, the IMU's rotation from the gyro.
 
 Gravity in the tracking world (whose axes are the first camera's, not level) is estimated while tracking from
 three trusted poses about :data:`GRAVITY_SPAN_NS` apart, velocities eliminated: the linear step of
@@ -22,6 +22,7 @@ import numpy as np
 
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.core.imu import ImuBatch, preintegrate
+from atsvo_ros.core.odometry.imu_state import VelocityWindow, clipped
 from atsvo_ros.errors import ImuError
 
 #: m/s^2: the magnitude the gravity estimate is scaled to (local gravity differs by < 0.3 %)
@@ -36,10 +37,15 @@ GRAVITY_TOLERANCE_M_S2 = 1.5
 
 @dataclass(frozen=True)
 class CameraMotion:
-    """The colour camera's centre (m) and velocity (m/s) in the tracking world at one stamp."""
+    """The colour camera's centre (m) and velocity (m/s) in the tracking world at one stamp.
+
+    ``measured`` is True when the centre comes from the fitted velocity and the accelerometer measured the whole
+    span from the fit's oldest pose to the stamp without clipping: then it is as good as the trusted poses.
+    """
 
     centre_w: np.ndarray
     velocity_w: np.ndarray
+    measured: bool = False
 
 
 class InertialPredictor:
@@ -47,10 +53,16 @@ class InertialPredictor:
 
     Args:
         T_rgb_imu: the IMU frame in the colour optical frame (4x4).
+        window: the IMU state fitted to the last trusted poses, or None (the last two poses' velocity only).
+        accel_range_m_s2: the accelerometer's range (0: unknown): a span with a clipped sample is not measured.
     """
 
-    def __init__(self, T_rgb_imu: np.ndarray) -> None:
+    def __init__(self, T_rgb_imu: np.ndarray, window: VelocityWindow | None = None,
+                 accel_range_m_s2: float = 0.0) -> None:
         self.T_c_imu = np.asarray(T_rgb_imu, dtype=np.float64).reshape(4, 4)
+        self.t_imu_c = se3_inv(self.T_c_imu)[:3, 3]
+        self.window = window
+        self.accel_range_m_s2 = float(accel_range_m_s2)
         self._trusted: deque[tuple[int, np.ndarray]] = deque()  # (stamp, T_w_imu) of trusted frames, ~2 spans
         self._estimates: deque[np.ndarray] = deque(maxlen=GRAVITY_ESTIMATES)
         self._last_estimate_ns: int | None = None
@@ -97,11 +109,15 @@ class InertialPredictor:
             history: the last two trusted ``(stamp_ns, T_c_w)``, oldest first.
             stamp_ns: the new frame's stamp.
 
+        The velocity is the window's fit when the last frame is its newest pose, else the last two poses'.
         None before a gravity estimate, without two poses or when the IMU does not cover the interval.
         """
         g_w = self.gravity_w
         if g_w is None or len(history) != 2:
             return None
+        fitted = self._from_window(imu, g_w, history[-1][0], int(stamp_ns))
+        if fitted is not None:
+            return fitted
         (s0, T0_c_w), (s1, T1_c_w) = history
         if not s0 < s1 < int(stamp_ns):
             return None
@@ -119,11 +135,31 @@ class InertialPredictor:
         R_w_i1 = T_w_i1[:3, :3]
         p2 = T_w_i1[:3, 3] + v1 * dt12 + 0.5 * g_w * dt12 * dt12 + R_w_i1 @ pre12.dp_m
         v2 = v1 + g_w * dt12 + R_w_i1 @ pre12.dv_m_s
-        R_w_i2 = R_w_i1 @ pre12.R_i0_i1
-        t_imu_c = se3_inv(self.T_c_imu)[:3, 3]
-        # the camera sits a lever arm off the IMU: it moves with the body's turn as well (w x r)
-        w_i2 = _last_rate(imu, int(stamp_ns))
-        return CameraMotion(p2 + R_w_i2 @ t_imu_c, v2 + R_w_i2 @ np.cross(w_i2, t_imu_c))
+        return self._camera(imu, int(stamp_ns), p2, v2, R_w_i1 @ pre12.R_i0_i1, measured=False)
+
+    def _from_window(self, imu: ImuBatch, g_w: np.ndarray, last_ns: int, stamp_ns: int) -> CameraMotion | None:
+        """The prediction from the window's fitted state, when the last frame is the window's newest pose."""
+        if self.window is None or self.window.newest_ns != last_ns or not last_ns < stamp_ns:
+            return None
+        state = self.window.fit(imu, g_w)
+        if state is None:
+            return None
+        try:
+            pre = preintegrate(imu, state.stamp_ns, stamp_ns)
+        except ImuError:
+            return None
+        dt = pre.dt_s
+        p = state.p_w + state.v_w * dt + 0.5 * g_w * dt * dt + state.R_w_i @ pre.dp_m
+        v = state.v_w + g_w * dt + state.R_w_i @ pre.dv_m_s
+        measured = not clipped(imu, self.window.oldest_ns, stamp_ns, self.accel_range_m_s2)
+        return self._camera(imu, stamp_ns, p, v, state.R_w_i @ pre.R_i0_i1, measured)
+
+    def _camera(self, imu: ImuBatch, stamp_ns: int, p_w: np.ndarray, v_w: np.ndarray, R_w_i: np.ndarray,
+                measured: bool) -> CameraMotion:
+        """The colour camera's centre and velocity from the IMU's: it sits a lever arm off the IMU, so it moves
+        with the body's turn as well (``w x r``)."""
+        w_i = _last_rate(imu, stamp_ns)
+        return CameraMotion(p_w + R_w_i @ self.t_imu_c, v_w + R_w_i @ np.cross(w_i, self.t_imu_c), measured)
 
 
 def _last_rate(imu: ImuBatch, stamp_ns: int) -> np.ndarray:

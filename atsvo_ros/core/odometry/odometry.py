@@ -44,6 +44,7 @@ from atsvo_ros.core.odometry.depth_timing import DepthTiming
 from atsvo_ros.core.odometry.event_side import EventSide
 from atsvo_ros.core.odometry.feature_assist import FeatureAssist, rotation_between_deg
 from atsvo_ros.core.odometry.gyro import GyroBuffer
+from atsvo_ros.core.odometry.imu_state import VelocityWindow
 from atsvo_ros.core.odometry.inertial import STANDARD_GRAVITY, InertialPredictor
 from atsvo_ros.core.odometry.output import ResultBuilder
 from atsvo_ros.core.odometry.prediction import Predictor
@@ -115,10 +116,14 @@ class Odometry:
         #: The accelerometer's camera centres and velocities and the gravity estimate they need
         #: (``tracker.imu_translation``, ``tracker.depth_time_translation``).
         uses_accel = config.tracker.imu_translation or config.tracker.depth_time_translation
-        self.inertial = InertialPredictor(config.rig.T_rgb_imu_matrix()) if uses_accel else None
+        #: The trusted poses of the last ``tracker.imu_velocity_window_s`` and the IMU state fitted to them.
+        self.velocity = VelocityWindow(config.rig.T_rgb_imu_matrix(),
+                                       int(config.tracker.imu_velocity_window_s * 1e9)) if uses_accel else None
+        self.inertial = InertialPredictor(config.rig.T_rgb_imu_matrix(),
+                                          self.velocity if config.tracker.imu_prior_sigma_m > 0 else None,
+                                          config.rig.imu_accel_range_m_s2) if uses_accel else None
         #: The camera's motion between the colour and the depth exposure (``tracker.depth_time_translation``).
-        self.depth_timing = DepthTiming(config.rig.T_rgb_imu_matrix(),
-                                        int(config.tracker.depth_velocity_window_s * 1e9)) \
+        self.depth_timing = DepthTiming(self.velocity) \
             if config.tracker.depth_time_translation and config.rig.depth_time_offset_s != 0 else None
         # until the online estimate exists: the base upright at the first frame (REP 103: base z up)
         self._gravity_prior_w = -STANDARD_GRAVITY * self.T_rgb_base[:3, 2]
@@ -183,8 +188,8 @@ class Odometry:
             self.motion.reset()
             if self.inertial is not None:
                 self.inertial.reset()
-            if self.depth_timing is not None:
-                self.depth_timing.reset()
+            if self.velocity is not None:
+                self.velocity.reset()
         predicted = self.motion.predict(stamp)
         raw = prepared
         prepared, moved = self._place_depth(raw, stamp)
@@ -195,13 +200,12 @@ class Odometry:
         if self._anchor is not None and not self._anchor.turned:
             self._turn_anchor()
         imu = self.predictor.imu_motion(stamp) if self.config.tracker.imu_translation else None
-        imu_centre = None if imu is None else imu.centre_w
-        gyro = self.predictor.gyro_pose(stamp, imu_centre)
+        gyro = self.predictor.gyro_pose(stamp, None if imu is None else imu.centre_w)
         fast = self.predictor.is_fast()
         guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())
         last = self.motion.last[1] if self.motion.last else predicted
         rs = self.predictor.rolling_shutter(stamp)
-        priors = self.predictor.priors(stamp, gyro, imu_centre)
+        priors = self.predictor.priors(stamp, gyro, imu)
         # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
         self.tracking.set_event_map(self.event_side.event_map() if fast else None)
         fused = self.tracking.uses_events(ev_frame)
@@ -282,8 +286,8 @@ class Odometry:
         """Hand a frame's pose to the gravity estimate (``ok`` frames only: a coasting pose is a prediction)."""
         if self.inertial is not None and self.gyro:
             self.inertial.observe(self.gyro.samples(), stamp, T_c_w, trusted)
-        if self.depth_timing is not None and trusted:
-            self.depth_timing.observe(stamp, T_c_w)
+        if self.velocity is not None and trusted:
+            self.velocity.observe(stamp, T_c_w)
 
     def _place_depth(self, prepared: PreparedFrame, stamp: int) -> tuple[PreparedFrame, bool]:
         """Place a depth image exposed ``rig.depth_time_offset_s`` off the colour: the camera's pose at its exposure.
@@ -501,8 +505,8 @@ class Odometry:
             if self.inertial is not None:
                 self.inertial.reset()
             self._new_map(stamp, raw if raw is not None else prepared, predicted, moved, prepared is not raw)
-            if self.depth_timing is not None:
-                self.depth_timing.reset()
+            if self.velocity is not None:
+                self.velocity.reset()
         else:
             reason = f"{reason}; {why_not}" if reason else why_not
         self.motion.push(stamp, predicted, trusted=False)

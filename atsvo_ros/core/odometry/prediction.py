@@ -70,11 +70,12 @@ class Predictor:
             scales += [0.75 * event_rate_ratio, event_rate_ratio, 1.25 * event_rate_ratio]
         return guesses + [self.motion.predict_scaled(stamp, k) for k in scales]
 
-    def priors(self, stamp: int, gyro: np.ndarray | None, centre: np.ndarray | None = None) -> Priors:
+    def priors(self, stamp: int, gyro: np.ndarray | None, imu: CameraMotion | None = None) -> Priors:
         """What the motion says this frame's pose should be: the gyro's prediction and, after two trusted frames,
-        the camera centre (``centre``, the accelerometer's, else constant velocity's) with the reach of
+        the camera centre (``imu``'s, the accelerometer's, else constant velocity's) with the reach of
         ``tracker.max_acceleration_m_s2``."""
         cfg = self.config.tracker
+        centre = None if imu is None else imu.centre_w
         check = self.motion.centre_prior(stamp, cfg.max_acceleration_m_s2, cfg.motion_noise_m)
         prior = None
         a_m, a_rad = cfg.motion_prior_acceleration_m_s2, cfg.motion_prior_angular_acceleration_rad_s2
@@ -90,9 +91,13 @@ class Predictor:
                 T_prior[:3, :3] = gyro[:3, :3]
                 T_prior[:3, 3] = -gyro[:3, :3] @ c_w
                 sigma_rad = self._gyro_sigma_rad(stamp, gyro)
-            if centre is not None:
-                T_prior[:3, 3] = -T_prior[:3, :3] @ centre
-            prior = MotionPrior(T_prior, a_m * spread, sigma_rad, cfg.motion_prior_huber)
+            sigma_m = a_m * spread
+            if imu is not None:
+                T_prior[:3, 3] = -T_prior[:3, :3] @ imu.centre_w
+                if imu.measured and cfg.imu_prior_sigma_m > 0:
+                    # the accelerometer measured every sample since the fit's first pose: as good as those poses
+                    sigma_m = min(sigma_m, cfg.imu_prior_sigma_m)
+            prior = MotionPrior(T_prior, sigma_m, sigma_rad, cfg.motion_prior_huber)
         if check is None:
             return Priors(gyro, motion=prior)
         return Priors(gyro, check[0] if centre is None else centre, check[1], motion=prior)

@@ -5,6 +5,7 @@ import numpy as np
 
 from atsvo_ros.core.geometry import rotation_angle_rad, se3_inv, so3_exp
 from atsvo_ros.core.odometry.depth_timing import DepthTiming
+from atsvo_ros.core.odometry.imu_state import VelocityWindow
 from test.core.odometry.motion_helpers import G_W, MS, T_c_w, imu_batch
 
 WINDOW_NS = 150 * MS
@@ -34,12 +35,12 @@ def _shift_errors(g_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     T_c_imu = _rig()
     imu = imu_batch(T_c_imu)
     rng = np.random.default_rng(3)
-    timing = DepthTiming(T_c_imu, WINDOW_NS)
+    timing = DepthTiming(VelocityWindow(T_c_imu, WINDOW_NS))
     stamps = [int(round(k / 30.0 * 1e9)) for k in range(48)]
     poses = {s: _noisy(T_c_w(s * 1e-9, T_c_imu), rng, 0.005) for s in stamps}
     fit, diff, largest = [], [], 0.0
     for k, s in enumerate(stamps[:-1]):
-        timing.observe(s, poses[s])
+        timing.window.observe(s, poses[s])
         nxt = stamps[k + 1]
         if nxt < 1_150 * MS:
             continue
@@ -73,19 +74,19 @@ def test_gravity_ten_degrees_off_costs_millimetres():
 def test_no_motion_without_poses_imu_cover_or_a_recent_pose():
     T_c_imu = _rig()
     imu = imu_batch(T_c_imu, span_s=1.0)
-    timing = DepthTiming(T_c_imu, WINDOW_NS)
+    timing = DepthTiming(VelocityWindow(T_c_imu, WINDOW_NS))
     for k in range(2):
-        timing.observe(k * 33 * MS, T_c_w(k * 0.033, T_c_imu))
+        timing.window.observe(k * 33 * MS, T_c_w(k * 0.033, T_c_imu))
     assert timing.camera_motion(imu, G_W, 70 * MS, 85 * MS) is None  # two poses: no fit yet
-    timing.observe(66 * MS, T_c_w(0.066, T_c_imu))
+    timing.window.observe(66 * MS, T_c_w(0.066, T_c_imu))
     assert timing.camera_motion(imu, G_W, 100 * MS, 115 * MS) is not None
     assert timing.camera_motion(imu, G_W, 200 * MS, 215 * MS) is None  # 134 ms past the newest trusted pose
     # the map's first frame, before the newest pose: moved backwards from the fit
     back = timing.camera_motion(imu, G_W, 0, 15 * MS)
     assert np.linalg.norm(back[:3, 3] - _true_motion(0, 15 * MS, T_c_imu)[:3, 3]) < 1e-3
     for k in range(3):  # poses past the IMU's end
-        timing.observe((1100 + 33 * k) * MS, T_c_w(1.1 + 0.033 * k, T_c_imu))
+        timing.window.observe((1100 + 33 * k) * MS, T_c_w(1.1 + 0.033 * k, T_c_imu))
     assert timing.camera_motion(imu, G_W, 1200 * MS, 1215 * MS) is None
     assert timing.oldest_ns == 1100 * MS  # the window dropped the old poses
-    timing.observe(1000 * MS, T_c_w(1.0, T_c_imu))  # time went back: a new window
+    timing.window.observe(1000 * MS, T_c_w(1.0, T_c_imu))  # time went back: a new window
     assert timing.oldest_ns == 1000 * MS

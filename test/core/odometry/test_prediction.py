@@ -8,6 +8,7 @@ from atsvo_ros.config import load_config
 from atsvo_ros.core.geometry import camera_centre, rotation_angle_rad, so3_exp
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.core.odometry.gyro import GyroBuffer
+from atsvo_ros.core.odometry.inertial import CameraMotion
 from atsvo_ros.core.odometry.prediction import Predictor
 from atsvo_ros.core.tracking.motion import MotionModel
 
@@ -61,3 +62,18 @@ def test_the_gyros_rate_change_is_measured_over_a_frame() -> None:
     assert np.degrees(gyro.rate_change(20 * MS, 53 * MS)) == pytest.approx(198.0, rel=0.02)
     assert np.degrees(gyro.rate_change(105 * MS, 138 * MS)) < 0.5  # a constant rate after the ramp
     assert gyro.rate_change(130 * MS, 200 * MS) is None  # past the samples
+
+
+@pytest.mark.parametrize("measured", [False, True])
+def test_the_prior_holds_a_measured_accelerometer_centre_tight_only_when_asked(measured: bool) -> None:
+    """``tracker.imu_prior_sigma_m`` (opt-in): the centre's sigma is it where the accelerometer measured the span,
+    constant velocity's reach (20 m/s^2 x 33 ms x 66 ms / 2: 2.2 cm) otherwise and with it off."""
+    centre = np.array([0.05, -0.01, 0.02])
+    motion = CameraMotion(centre, np.zeros(3), measured)
+    reach = 20.0 * 0.033 * 0.066 / 2
+    for sigma in (0.0, 0.003):
+        pred = _predictor(imu_prior_sigma_m=sigma)
+        prior = pred.priors(66 * MS, None, motion).motion
+        assert np.allclose(camera_centre(prior.T_pred_rgb_w), centre, atol=1e-12)  # the accelerometer's centre
+        expected = 0.003 if measured and sigma > 0 else reach
+        assert prior.sigma_m == pytest.approx(expected)
