@@ -29,7 +29,6 @@ class Keyframe:
     stamp_ns: int
     T_w_c: np.ndarray
     affine: tuple[float, float]
-    sharp: bool = True  # taken below the fusion gate (its colour is not motion-blurred)
 
 
 def valid_depth_mask(depth_m: np.ndarray, rig: RigConfig, edge_ratio: float | None = None,
@@ -131,12 +130,8 @@ class PointMap:
         return len(self.points_w)
 
     def add_keyframe(self, stamp_ns: int, T_w_c: np.ndarray, affine: tuple[float, float],
-                     points_c: np.ndarray, patches: np.ndarray, geo_points_c: np.ndarray | None = None,
-                     sharp: bool = True) -> Keyframe:
-        """Insert a keyframe, its photometric points (camera frame, patches ``(L, N, P)``) and geometric points.
-
-        ``sharp``: its colour image is not motion-blurred (see :meth:`cull`).
-        """
+                     points_c: np.ndarray, patches: np.ndarray, geo_points_c: np.ndarray | None = None) -> Keyframe:
+        """Insert a keyframe, its photometric points (camera frame, patches ``(L, N, P)``) and geometric points."""
         points_c = np.asarray(points_c, dtype=np.float64).reshape(-1, 3)
         geo = np.zeros((0, 3)) if geo_points_c is None else np.asarray(geo_points_c, dtype=np.float64).reshape(-1, 3)
         patches = np.asarray(patches, dtype=np.float32)
@@ -147,7 +142,7 @@ class PointMap:
             if not np.all(np.isfinite(p)) or (len(p) and p[:, 2].min() <= 0):
                 raise TrackingError(f"{name} need finite positions in front of the camera")
         kf = Keyframe(self._next_kf, int(stamp_ns), np.asarray(T_w_c, dtype=np.float64).copy(),
-                      (float(affine[0]), float(affine[1])), bool(sharp))
+                      (float(affine[0]), float(affine[1])))
         self._next_kf += 1
         self.keyframes[kf.kf_id] = kf
         self.points_w = np.concatenate([self.points_w, transform_points(kf.T_w_c, points_c)])
@@ -181,17 +176,10 @@ class PointMap:
         return n
 
     def cull(self, max_keyframes: int, max_points: int) -> int:
-        """Bound the map: keyframes beyond the window (with their points) and the oldest excess points.
-
-        The oldest keyframe goes, unless it is the newest sharp one: through a flip every frame is a keyframe of
-        blurred colour adding a handful of points, and pushing out the last sharp keyframe left the map nearly
-        empty after the landing (docs/odometry.md, the probe with harder sensor settings).
-        """
+        """Bound the map: keyframes beyond the window (with their points) and the oldest excess points."""
         removed = 0
         while len(self.keyframes) > max_keyframes:
-            ids = sorted(self.keyframes)
-            sharp = [k for k in ids if self.keyframes[k].sharp]
-            oldest = ids[1] if sharp and sharp[-1] == ids[0] and len(ids) > 1 else ids[0]
+            oldest = min(self.keyframes)
             removed += self.remove_points(self.host == oldest)
             keep_geo = self.geo_host != oldest
             self.geo_points_w, self.geo_host = self.geo_points_w[keep_geo], self.geo_host[keep_geo]

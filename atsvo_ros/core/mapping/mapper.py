@@ -45,7 +45,6 @@ class KeyframeRequest:
     (new points fill the gaps between them). ``reset`` starts a new map from this frame.
     ``rolling_shutter`` (with the frame's velocity) places points seen at other times than the stamp.
     ``geometry_only``: add depth points only (a coasting frame: its colour image did not hold the pose).
-    ``blurred``: taken while the camera turned fast (its colour is motion-blurred; see ``PointMap.cull``).
     """
 
     snapshot_id: int
@@ -57,7 +56,6 @@ class KeyframeRequest:
     reset: bool = False
     rolling_shutter: RollingShutter | None = None
     geometry_only: bool = False
-    blurred: bool = False
 
 
 @dataclass(frozen=True)
@@ -135,8 +133,7 @@ class Mapper:
                 p_c = req.rolling_shutter.to_stamp(p_c, uv[:, 1], req.T_c_w)
                 geo_c = req.rolling_shutter.to_stamp(geo_c, geo_uv[:, 1], req.T_c_w)
             patches = extract_patches(frame.pyramid, uv, RGB_PATTERN, affine)
-            kf = self._map.add_keyframe(frame.stamp_ns, se3_inv(req.T_c_w), affine, p_c, patches, geo_c,
-                                        sharp=not (req.blurred or req.geometry_only))
+            kf = self._map.add_keyframe(frame.stamp_ns, se3_inv(req.T_c_w), affine, p_c, patches, geo_c)
             self._map.cull(mapping.max_keyframes, mapping.max_points)
             self.n_keyframes += 1
             added = len(uv)

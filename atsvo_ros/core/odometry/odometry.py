@@ -262,8 +262,7 @@ class Odometry:
             # replaces them, or tracking goes on against blur (measured: 1-2 cm of jitter per frame after a landing)
             refresh = self._blurred_keyframe and not fast and status is TrackingStatus.OK
             if out.health is not None and (out.health.needs_keyframe or refresh):
-                kf = self._insert(self.tracking.keyframe_request(self.frontend.at_colour_time(prepared), out, rs,
-                                                                 blurred=fast))
+                kf = self._insert(self.tracking.keyframe_request(self.frontend.at_colour_time(prepared), out, rs))
                 if kf:
                     self._blurred_keyframe = fast
         coasts = self._coasts(out, stamp)

@@ -230,13 +230,10 @@ class Tracking:
                                                    coast_reason)
 
     def keyframe_request(self, frame: PreparedFrame, outcome: TrackingOutcome,
-                         rolling_shutter: RollingShutter | None = None, geometry_only: bool = False,
-                         blurred: bool = False) -> KeyframeRequest:
-        """A request to insert ``frame`` as a keyframe at the tracked pose (``geometry_only``: depth points only;
-        ``blurred``: taken while the camera turned fast)."""
+                         rolling_shutter: RollingShutter | None = None, geometry_only: bool = False) -> KeyframeRequest:
+        """A request to insert ``frame`` as a keyframe at the tracked pose (``geometry_only``: depth points only)."""
         return KeyframeRequest(self.snapshot.snapshot_id, frame, outcome.T_c_w, outcome.affine, outcome.tracked_uv,
-                               self._outlier_runs.copy(), rolling_shutter=rolling_shutter, geometry_only=geometry_only,
-                               blurred=blurred)
+                               self._outlier_runs.copy(), rolling_shutter=rolling_shutter, geometry_only=geometry_only)
 
     @staticmethod
     def reset_request(frame: PreparedFrame, T_c_w: np.ndarray,

@@ -95,25 +95,6 @@ def test_culling_bounds_memory_over_many_keyframes():
     assert m.host.min() >= 47  # only the newest keyframes survive
 
 
-def test_culling_keeps_the_newest_sharp_keyframe_through_a_run_of_blurred_ones():
-    """A flip: every frame a keyframe of blurred colour with a few points; the last sharp one (1000 points) stays,
-    the blurred ones go oldest first, and once a sharp keyframe follows the old sharp one may go."""
-    m = PointMap(2, 9)
-    p = np.array([[0.0, 0.0, 2.0]])
-    for _ in range(3):
-        _add(m, 1000)
-        m.cull(max_keyframes=4, max_points=10000)
-    anchor = max(m.keyframes)
-    for _ in range(6):  # blurred keyframes, 1 point each
-        m.add_keyframe(0, np.eye(4), (0.0, 0.0), p, np.zeros((2, 1, 9), np.float32), sharp=False)
-        m.cull(max_keyframes=4, max_points=10000)
-        assert anchor in m.keyframes and len(m.keyframes) == 4
-    assert int(np.sum(m.host == anchor)) == 1000
-    _add(m, 1000)  # a sharp one again: the old anchor is the oldest and no longer the newest sharp one
-    m.cull(max_keyframes=4, max_points=10000)
-    assert anchor not in m.keyframes
-
-
 def test_snapshots_are_immutable_copies():
     m = PointMap(2, 9)
     _add(m, 4)

@@ -127,8 +127,7 @@ def test_with_the_gyro_the_event_term_waits_for_faster_turns(robot_bound):
 
 def test_the_imu_carries_the_flight_with_the_gyros_prior_and_the_accelerometers_centre(robot_flip):
     """Fed the IMU, the flip's rotation is held to the gyro's (``tracker.gyro_prior_sigma_deg``) and its centre
-    predicted by the accelerometer (``tracker.imu_translation``): 6.75 cm (6.69 before the newest sharp keyframe
-    was kept through a flip). Neither: 18.61 (the depth term pulls the
+    predicted by the accelerometer (``tracker.imu_translation``): 6.69 cm. Neither: 18.61 (the depth term pulls the
     coasting frames past the flight's peak 6-11 cm a frame off, and constant velocity carries that on); the
     accelerometer alone 16.14; the gyro's prior alone 35.65 (tuning seeds 0-9: docs/odometry.md)."""
     flip = robot_flip
