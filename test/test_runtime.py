@@ -485,6 +485,39 @@ def test_a_dead_stream_still_releases_frames_with_the_arrival_clock(bag):
     assert rt.counters["frames_without_imu"] > 0 and rt.assembler.stats.released_without_events > 0
 
 
+def test_a_longer_stall_wait_waits_out_a_paused_stream(bag):
+    """The node's loss-free mode (stall_wait_s 1.5 s): the event and IMU streams pause for 0.6 s of wall time
+    while the images keep coming, then deliver their backlog. The default 0.25 s wait sends frames without them;
+    the longer wait gives every frame what the in-order replay gives it."""
+    from atsvo_ros.io.images import stamp_ns
+
+    cfg = load_config("synthetic")
+    items = _sensor_messages(bag, cfg)
+    t0 = stamp_ns(items[0][2])
+    pause_from, pause_to = t0 + 100_000_000, t0 + 700_000_000
+    slow = (cfg.topics.imu, cfg.topics.events)
+
+    def arrival(m):  # the paused streams' messages arrive right after the pause, in stamp order
+        t = stamp_ns(m[2])
+        return (pause_to + (t - pause_from) // 100) if m[0] in slow and pause_from <= t < pause_to else t
+
+    arrivals = sorted(((arrival(m), k) for k, m in enumerate(items)))
+    paused = [items[k] for _, k in arrivals]
+    now = [0]
+
+    def at(k):
+        now[0] = arrivals[k][0] - t0
+
+    ref = _deliver(OdometryRuntime(cfg, core_factory=_StreamRecording), cfg, items, lambda k: None)
+    impatient = OdometryRuntime(cfg, core_factory=_StreamRecording, clock=lambda: now[0])
+    assert _deliver(impatient, cfg, paused, at) != ref
+    assert impatient.assembler.stats.released_without_events > 0 and impatient.counters["frames_without_imu"] > 0
+    patient = OdometryRuntime(cfg, core_factory=_StreamRecording, clock=lambda: now[0], stall_wait_s=1.5)
+    assert _deliver(patient, cfg, paused, at) == ref and len(ref[0]) >= 15
+    assert patient.assembler.stats.released_without_events == patient.counters["frames_without_imu"] == 0
+    assert patient.assembler.stats.late_events == patient.counters["imu_late"] == 0
+
+
 def test_the_core_in_a_process_of_its_own_gives_the_same_poses(bag):
     """``node.core_process``: frames, events and IMU samples go to a child process and the same poses come back
     (synchronous mapping, as the replay), with the map snapshots first; a second core in the same child starts

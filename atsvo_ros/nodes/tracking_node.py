@@ -78,6 +78,10 @@ _CLASSES = MsgClasses(Time, Header, OdometryMsg, PoseWithCovariance, Pose, Point
 #: status -> diagnostic level of the per-frame status message (see the README)
 #: Loss-free mode's queue: 10 s of frames at 30 Hz (2 MB each at 640x480) before the oldest would be dropped.
 LOSS_FREE_QUEUE = 300
+#: Loss-free mode: seconds a silent event or IMU stream (or all inputs, for the end of stream) is waited for
+#: before frames go without it. A reliable stream that pauses is late, not lost: with node.imu_max_wait_s
+#: (0.25 s) a loaded CI run sent one frame mid-stream without its events.
+LOSS_FREE_WAIT_S = 1.5
 STATUS_LEVEL = {"ok": OK, "initialising": WARN, "degraded": WARN, "relocalised": WARN, "reinitialised": WARN,
                 "lost": ERROR}
 
@@ -125,14 +129,16 @@ class TrackingNode(Node):
             self._core_host = CoreHost(cfg, use_events, on_snapshot=on_snapshot)
             log.info(f"odometry core in process {self._core_host.pid} (warmed up in {self._core_host.warm_up_s:.2f} s)")
 
-        # arrival clock: a stream is stalled when silent, not merely behind (backlogs drain unevenly)
-        factory = make_core if self._core_host is None else self._core_host.new_core  # the child builds the Odometry
-        self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=factory,
-                                       clock=time.monotonic_ns, expect_imu=nc.use_imu)
         # loss-free mode (reliable inputs, synchronous mapping: every frame must count, as in the replay): the queue
         # holds a backlog of LOSS_FREE_QUEUE frames instead of node.queue_size. It cannot block: the default
         # executor is single-threaded, and a blocked sensor callback would starve the map snapshots it waits for.
+        # A stream that pauses (a loaded player, a stalled executor) is waited for LOSS_FREE_WAIT_S, not given up.
         self.loss_free = nc.sensor_qos == "reliable" and cfg.mapping.synchronous
+        stall_wait_s = max(nc.imu_max_wait_s, LOSS_FREE_WAIT_S) if self.loss_free else None
+        # arrival clock: a stream is stalled when silent, not merely behind (backlogs drain unevenly)
+        factory = make_core if self._core_host is None else self._core_host.new_core  # the child builds the Odometry
+        self.runtime = OdometryRuntime(cfg, use_events=use_events, logger=self._runtime_log, core_factory=factory,
+                                       clock=time.monotonic_ns, expect_imu=nc.use_imu, stall_wait_s=stall_wait_s)
         self.queue: DropOldestQueue[FrameInput] = DropOldestQueue(
             max(nc.queue_size, LOSS_FREE_QUEUE) if self.loss_free else nc.queue_size,
             merge=lambda old, new: new.after(old))
@@ -167,7 +173,8 @@ class TrackingNode(Node):
         # (a stalled executor runs the callbacks it owes between them), the frames still waiting go out
         self._heard_ns = time.monotonic_ns()
         self._silent_ticks = 0
-        self._end_wait_ns = int(nc.imu_max_wait_s * 1e9)
+        end_wait_s = nc.imu_max_wait_s if stall_wait_s is None else stall_wait_s
+        self._end_wait_ns = int(end_wait_s * 1e9)
         self.create_timer(max(0.05, nc.imu_max_wait_s / 2), self._on_silence_tick, callback_group=sensors)
 
         # ---- mapping over topics
@@ -275,7 +282,7 @@ class TrackingNode(Node):
             self.queue.put(inp)
 
     def _on_silence_tick(self) -> None:
-        """End of stream: no input for node.imu_max_wait_s, seen on two ticks: the waiting frames go out.
+        """End of stream: no input for node.imu_max_wait_s (loss-free: LOSS_FREE_WAIT_S), seen on two ticks.
 
         The last frame of a stream waits for events and IMU samples past its stamp that never come; the
         replay releases it at the end of the bag, the node once the silence has lasted this long.

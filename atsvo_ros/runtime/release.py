@@ -34,7 +34,7 @@ class FrameRelease:
 
     def __init__(self, config: AtsvoConfig, assembler: FrameAssembler, problems: ProblemLog, *,
                  clock: Callable[[], int] | None, clock_jump_s: float, imu_keep_ns: int,
-                 max_held_frames: int, expect_imu: bool = False) -> None:
+                 max_held_frames: int, expect_imu: bool = False, imu_wait_s: float | None = None) -> None:
         """Create the gate.
 
         Args:
@@ -47,6 +47,8 @@ class FrameRelease:
             max_held_frames: Frames held while the colour camera_info is missing.
             expect_imu: An IMU stream is coming: the first frames wait ``node.imu_max_wait_s`` of stamps for its
                 first sample (without, a frame goes as soon as it is paired until the IMU speaks).
+            imu_wait_s: How long the IMU may lag (stamps) and be silent (``clock``) before it counts as stalled;
+                None: ``node.imu_max_wait_s``.
         """
         self.assembler = assembler
         self._problems = problems
@@ -63,7 +65,8 @@ class FrameRelease:
         # (the depth is turned to the colour's time by the gyro in between)
         self._offset_ns = int(round((config.rgb_camera.time_offset_s + max(0.0, config.rig.depth_time_offset_s))
                                     * 1e9))
-        self._imu_wait_ns = int(round(config.node.imu_max_wait_s * 1e9))  # then the IMU counts as silent
+        wait_s = config.node.imu_max_wait_s if imu_wait_s is None else imu_wait_s
+        self._imu_wait_ns = int(round(wait_s * 1e9))  # then the IMU counts as silent
         self._held: deque[FrameInput] = deque()  # frames waiting for the colour camera_info
         # no IMU expected, or it never spoke within imu_max_wait_s of stamps after the first frame: frames go
         self._imu_absent = not expect_imu

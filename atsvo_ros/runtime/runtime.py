@@ -77,9 +77,13 @@ class OdometryRuntime:
                  event_camera: CameraModel | None = None, *, use_events: bool | None = None,
                  logger: Logger | None = None, core_factory: Callable[..., OdometryCore] | None = None,
                  log_interval_s: float = 10.0, sinks: Sequence[Sink] = (),
-                 clock: Callable[[], int] | None = None, expect_imu: bool = False) -> None:
+                 clock: Callable[[], int] | None = None, expect_imu: bool = False,
+                 stall_wait_s: float | None = None) -> None:
         """``clock``: arrival time in ns (the node: ``time.monotonic_ns``); None (replay) judges stalls by stamps.
-        ``expect_imu``: IMU messages will come (the first frames wait for the first of them, see FrameRelease)."""
+        ``expect_imu``: IMU messages will come (the first frames wait for the first of them, see FrameRelease).
+        ``stall_wait_s``: how long the event and IMU streams may lag and be silent before a frame goes without
+        them (the node's loss-free mode waits longer); None: 0.25 s for events (``REPLAY_EVENT_WAIT_S`` without
+        a clock) and ``node.imu_max_wait_s`` for the IMU."""
         self.config = config
         #: called with every output, right after its frame (the core holds that frame's state: surface, map)
         self.sinks: tuple[Sink, ...] = tuple(sinks)
@@ -93,14 +97,15 @@ class OdometryRuntime:
             self.add_events, self._problems, max_held_msgs=self.MAX_HELD_EVENT_MSGS)
         # events waiting for their frame: at most what the core would fold in over the assembler's wait. A
         # replay (no arrival clock) has no deadline: it waits longer for event messages logged late
-        wait_s = 0.25 if clock is not None else self.REPLAY_EVENT_WAIT_S
+        wait_s = stall_wait_s if stall_wait_s is not None else 0.25 if clock is not None else self.REPLAY_EVENT_WAIT_S
         self.assembler = FrameAssembler(config.rig, with_events=self.use_events, max_event_wait_s=wait_s,
                                         max_pending=max(30, int(round(wait_s * 60))),  # frames of up to 60 Hz
                                         max_buffered_events=int(config.fusion.max_event_rate_ev_s * wait_s),
                                         clock=clock)
         self._release = FrameRelease(config, self.assembler, self._problems, clock=clock,
                                      clock_jump_s=self.CLOCK_JUMP_S, imu_keep_ns=self.IMU_KEEP_NS,
-                                     max_held_frames=self.MAX_HELD_FRAMES, expect_imu=expect_imu)
+                                     max_held_frames=self.MAX_HELD_FRAMES, expect_imu=expect_imu,
+                                     imu_wait_s=stall_wait_s)
         self._clocks = ClockCheck(self._problems)
         self._event_clock = EventClock(config.event_camera.time_offset_s, self._problems)
         self._offset_search = EventOffsetSearch(config.event_camera.time_offset_search_s if self.use_events else 0.0,
