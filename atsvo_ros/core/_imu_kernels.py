@@ -75,3 +75,73 @@ def _preintegrate(t_s, gyro, accel):  # pragma: no cover - compiled
         out[9 + i] = v[i]
         out[12 + i] = p[i]
     return out
+
+
+@njit("float64(float64[::1], float64[::1], float64)", cache=True, nogil=True)
+def _interp(x, y, xq):  # pragma: no cover - compiled
+    """``np.interp(xq, x, y)`` for one query: linear between samples, the end values beyond them."""
+    n = x.shape[0]
+    if xq <= x[0]:
+        return y[0]
+    if xq >= x[n - 1]:
+        return y[n - 1]
+    j = np.searchsorted(x, xq, side="right") - 1
+    return y[j] + (y[j + 1] - y[j]) / (x[j + 1] - x[j]) * (xq - x[j])
+
+
+@njit("float64[:, ::1](int64[::1], float64[:, ::1], int64, int64, float64[::1])", cache=True, nogil=True)
+def _integrate_gyro(stamps, gyro, t0, t1, bias):  # pragma: no cover - compiled
+    """``R_i0_i1`` from ``t0`` to ``t1`` (``t0 < t1``, ns), not re-orthonormalised.
+
+    The rate (minus ``bias``) is linear between samples and held beyond the first and last; each interval
+    between ``t0``, the samples strictly inside and ``t1`` adds ``(w_a + w_b) / 2 dt + (w_a x w_b) dt^2 / 12``.
+    """
+    i0 = np.searchsorted(stamps, t0, side="right")
+    i1 = np.searchsorted(stamps, t1, side="left")
+    m = i1 - i0 + 2  # edges
+    x = (stamps - stamps[0]).astype(np.float64)
+    edges = np.empty(m, np.int64)
+    edges[0], edges[m - 1] = t0, t1
+    edges[1:m - 1] = stamps[i0:i1]
+    w = np.empty((m, 3))
+    cols = np.ascontiguousarray(gyro.T)
+    for k in range(3):
+        for e in range(m):
+            w[e, k] = _interp(x, cols[k], float(edges[e] - stamps[0])) - bias[k]
+    R = np.eye(3)
+    E = np.empty((3, 3))
+    nxt = np.empty((3, 3))
+    for e in range(m - 1):
+        dt = (edges[e + 1] - edges[e]) * 1e-9
+        if dt <= 0.0:
+            continue
+        ax, ay, az = w[e, 0], w[e, 1], w[e, 2]
+        bx, by, bz = w[e + 1, 0], w[e + 1, 1], w[e + 1, 2]
+        c = dt * dt / 12.0
+        _exp_so3(E, 0.5 * (ax + bx) * dt + (ay * bz - az * by) * c, 0.5 * (ay + by) * dt + (az * bx - ax * bz) * c,
+                 0.5 * (az + bz) * dt + (ax * by - ay * bx) * c)
+        _matmul3(nxt, R, E)
+        R[:, :] = nxt
+    return R
+
+
+@njit("float64[::1](int64[::1], float64[:, ::1], float64[:, ::1], int64, int64)", cache=True, nogil=True)
+def _preintegrate_span(stamps, gyro, accel, t0, t1):  # pragma: no cover - compiled
+    """:func:`_preintegrate` from ``t0`` to ``t1`` (ns) over the samples: edges at ``t0``, the samples strictly
+    inside and ``t1``, rates and specific forces linear between samples and held beyond them."""
+    i0 = np.searchsorted(stamps, t0, side="right")
+    i1 = np.searchsorted(stamps, t1, side="left")
+    m = max(i1 - i0, 0) + 2
+    x = (stamps - t0).astype(np.float64)
+    t_s = np.empty(m)
+    g = np.empty((m, 3))
+    a = np.empty((m, 3))
+    g_cols, a_cols = np.ascontiguousarray(gyro.T), np.ascontiguousarray(accel.T)
+    for e in range(m):
+        te = t0 if e == 0 else (t1 if e == m - 1 else stamps[i0 + e - 1])
+        xq = float(te - t0)
+        t_s[e] = xq * 1e-9
+        for k in range(3):
+            g[e, k] = _interp(x, g_cols[k], xq)
+            a[e, k] = _interp(x, a_cols[k], xq)
+    return _preintegrate(t_s, g, a)

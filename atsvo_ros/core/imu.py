@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from atsvo_ros.core._imu_kernels import _preintegrate
-from atsvo_ros.core.geometry import project_to_so3, so3_exp
+from atsvo_ros.core._imu_kernels import _integrate_gyro, _preintegrate_span
+from atsvo_ros.core.geometry import project_to_so3
 from atsvo_ros.errors import ImuError
 
 
@@ -104,15 +104,6 @@ def interpolate_gyro(batch: ImuBatch, t_ns: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(tq, x, part.gyro_rad_s[:, k]) for k in range(3)], axis=-1)
 
 
-def _chain_product(R: np.ndarray) -> np.ndarray:
-    """``R[0] @ R[1] @ ... @ R[-1]`` by pairwise products (log2 N vectorised steps, order kept)."""
-    while len(R) > 1:
-        if len(R) % 2:
-            R = np.concatenate([R, np.eye(3)[None]])
-        R = R[0::2] @ R[1::2]
-    return R[0]
-
-
 def integrate_gyro(batch: ImuBatch, t0_ns: int, t1_ns: int, bias_rad_s: np.ndarray | None = None) -> np.ndarray:
     """Rotation ``R_imu0_imu1`` (3x3) of the IMU frame from ``t0_ns`` to ``t1_ns`` from its gyro samples.
 
@@ -126,19 +117,17 @@ def integrate_gyro(batch: ImuBatch, t0_ns: int, t1_ns: int, bias_rad_s: np.ndarr
     if t1_ns < t0_ns:
         return integrate_gyro(batch, t1_ns, t0_ns, bias_rad_s).T
     _check_covers(batch, t0_ns, t1_ns)
+    return _rotation(batch, t0_ns, t1_ns, bias_rad_s)
+
+
+def _rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, bias_rad_s: np.ndarray | None = None) -> np.ndarray:
+    """The kernel's rotation from ``t0_ns`` to ``t1_ns`` (rates held beyond the samples), re-orthonormalised."""
     if t1_ns == t0_ns:
         return np.eye(3)
-    inner = batch.time_slice(t0_ns + 1, t1_ns)
-    stamps = np.concatenate([[t0_ns], inner.stamps_ns, [t1_ns]])
-    w = np.concatenate([interpolate_gyro(batch, [t0_ns]), inner.gyro_rad_s, interpolate_gyro(batch, [t1_ns])])
-    if bias_rad_s is not None:
-        w = w - np.asarray(bias_rad_s, dtype=np.float64).reshape(1, 3)
-    dt = (np.diff(stamps) * 1e-9)[:, None]
-    wa, wb = w[:-1], w[1:]
-    phi = 0.5 * (wa + wb) * dt + np.cross(wa, wb) * (dt * dt / 12.0)
-    return project_to_so3(_chain_product(so3_exp(phi)))
-
-
+    bias = np.zeros(3) if bias_rad_s is None else np.asarray(bias_rad_s, dtype=np.float64).reshape(3)
+    part = _around(batch, t0_ns, t1_ns)
+    return project_to_so3(_integrate_gyro(part.stamps_ns, np.ascontiguousarray(part.gyro_rad_s), t0_ns, t1_ns,
+                                          np.ascontiguousarray(bias)))
 
 
 def gyro_rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns: int = 30_000_000) -> np.ndarray:
@@ -155,15 +144,11 @@ def gyro_rotation(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns:
     a, b = max(t0_ns, batch.t_first_ns), min(t1_ns, batch.t_last_ns)
     if a - t0_ns > max_extrapolation_ns or t1_ns - b > max_extrapolation_ns:
         return integrate_gyro(batch, t0_ns, t1_ns)  # raises with the spans
-    if a > b:  # the whole interval before the first sample or after the last, within reach: hold that rate
-        rate = batch.gyro_rad_s[0] if t1_ns <= batch.t_first_ns else batch.gyro_rad_s[-1]
-        return project_to_so3(so3_exp(rate * ((t1_ns - t0_ns) * 1e-9)))
-    R = integrate_gyro(batch, a, b)
-    if a > t0_ns:
-        R = so3_exp(batch.gyro_rad_s[0] * ((a - t0_ns) * 1e-9)) @ R
-    if t1_ns > b:
-        R = R @ so3_exp(batch.gyro_rad_s[-1] * ((t1_ns - b) * 1e-9))
-    return project_to_so3(R)
+    if t1_ns < t0_ns:
+        return gyro_rotation(batch, t1_ns, t0_ns, max_extrapolation_ns).T
+    if not batch.is_sorted():
+        raise ImuError("IMU stamps must not decrease")
+    return _rotation(batch, t0_ns, t1_ns)
 
 
 @dataclass(frozen=True)
@@ -195,16 +180,9 @@ def preintegrate(batch: ImuBatch, t0_ns: int, t1_ns: int, max_extrapolation_ns: 
     if batch.t_first_ns - t0_ns > max_extrapolation_ns or t1_ns - batch.t_last_ns > max_extrapolation_ns:
         raise ImuError(f"IMU samples span [{batch.t_first_ns}, {batch.t_last_ns}] ns, which does not cover "
                        f"[{t0_ns}, {t1_ns}] ns")
-    i0, i1 = np.searchsorted(batch.stamps_ns, [t0_ns, t1_ns], side="right")
-    inner = batch.stamps_ns[i0:i1]
-    inner = inner[inner < t1_ns]
-    edges = np.concatenate([[t0_ns], inner, [t1_ns]]).astype(np.int64)
     part = _around(batch, t0_ns, t1_ns)
-    x = (part.stamps_ns - t0_ns).astype(np.float64)
-    xq = (edges - t0_ns).astype(np.float64)
-    gyro = np.stack([np.interp(xq, x, part.gyro_rad_s[:, k]) for k in range(3)], axis=-1)
-    accel = np.stack([np.interp(xq, x, part.accel_m_s2[:, k]) for k in range(3)], axis=-1)
-    out = _preintegrate(np.ascontiguousarray(xq * 1e-9), np.ascontiguousarray(gyro), np.ascontiguousarray(accel))
+    out = _preintegrate_span(part.stamps_ns, np.ascontiguousarray(part.gyro_rad_s),
+                             np.ascontiguousarray(part.accel_m_s2), t0_ns, t1_ns)
     return Preintegration((t1_ns - t0_ns) * 1e-9, project_to_so3(out[:9].reshape(3, 3)), out[9:12].copy(),
                           out[12:].copy())
 

@@ -25,7 +25,8 @@ class GyroBuffer:
         self.R_rgb_imu = R_rgb_imu
         self._batches: deque[ImuBatch] = deque()
         self._joined: ImuBatch | None = None  # the batches as one, until the next add (several queries per frame)
-        # rotations asked for since the last add: a frame asks for the same interval several times (~0.6 ms each)
+        # rotations asked for: a frame asks for the same interval several times, and the next frame for the last
+        # frame's interval again; an add keeps those its samples cannot change
         self._rotations: dict[tuple[int, int], np.ndarray | None] = {}
 
     def __bool__(self) -> bool:
@@ -36,12 +37,19 @@ class GyroBuffer:
         """Buffer a time-ordered batch (empty ones are ignored) and drop the batches older than :data:`BUFFER_NS`."""
         if len(batch) == 0:
             return
+        old_last = self._batches[-1].t_last_ns if self._batches else None
         self._batches.append(batch)
         self._joined = None
-        self._rotations.clear()
         newest = batch.t_last_ns
         while self._batches and self._batches[0].t_last_ns < newest - self.BUFFER_NS:
             self._batches.popleft()
+        if old_last is None or batch.t_first_ns < old_last:
+            self._rotations.clear()
+            return
+        # a rotation between samples that were already in (no rate held past the newest) stays what it was
+        first = self._batches[0].t_first_ns
+        self._rotations = {k: R for k, R in self._rotations.items()
+                           if R is not None and k[1] <= old_last and k[0] >= first}
 
     def samples(self) -> ImuBatch:
         """The buffered samples as one batch (joined once per add: several queries per frame read it)."""

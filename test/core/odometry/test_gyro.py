@@ -39,3 +39,19 @@ def test_old_batches_leave_the_buffer():
     buf.add(_batch(0, 20, 1.0))
     buf.add(_batch(GyroBuffer.BUFFER_NS // MS + 200, 20, 1.0))
     assert buf.rotation(0, 90 * MS) is None
+
+
+def test_an_add_keeps_only_the_rotations_its_samples_cannot_change():
+    """Rotations are cached across adds (the next frame asks for the last frame's interval again), but one that held
+    the newest rate past the newest sample is computed again from the samples that came since."""
+    buf = GyroBuffer(np.eye(3))
+    buf.add(_batch(0, 20, 1.0))  # 0-95 ms at 1 rad/s
+    buf.rotation(0, 90 * MS)
+    assert abs(_angle_z(buf.rotation(80 * MS, 110 * MS)) - 0.03) < 1e-9  # 1 rad/s held past 95 ms
+    buf.add(_batch(100, 20, 2.0))
+    fresh = GyroBuffer(np.eye(3))
+    fresh.add(_batch(0, 20, 1.0))
+    fresh.add(_batch(100, 20, 2.0))
+    assert np.array_equal(buf.rotation(0, 90 * MS), fresh.rotation(0, 90 * MS))
+    assert np.array_equal(buf.rotation(80 * MS, 110 * MS), fresh.rotation(80 * MS, 110 * MS))
+    assert _angle_z(buf.rotation(80 * MS, 110 * MS)) > 0.04  # 2 rad/s from 100 ms on
