@@ -13,43 +13,35 @@ import cv2
 import numpy as np
 
 from atsvo_ros.config import RgbSelectionConfig
-from atsvo_ros.core.image.pyramid import image_gradients
+from atsvo_ros.core.mapping import _rgb_selection_kernels as kern
 from atsvo_ros.errors import ImageError
 
 
 def gradient_magnitude(grey: np.ndarray) -> np.ndarray:
-    """Central-difference gradient norm (intensity units per pixel), float32."""
-    gx, gy = image_gradients(grey)
-    return np.sqrt(gx * gx + gy * gy)
+    """Central-difference gradient norm (intensity units per pixel; 0 across the border), float32."""
+    return kern._gradient_magnitude(np.ascontiguousarray(grey, dtype=np.float32))
 
 
 def block_thresholds(grad: np.ndarray, block_px: int, min_gradient: float) -> np.ndarray:
     """Per-pixel threshold: median gradient of each ``block_px`` block + ``min_gradient``, smoothed 3x3."""
     h, w = grad.shape
-    hb, wb = -(-h // block_px), -(-w // block_px)
-    padded = np.pad(grad, ((0, hb * block_px - h), (0, wb * block_px - w)), mode="edge")
-    blocks = padded.reshape(hb, block_px, wb, block_px).transpose(0, 2, 1, 3).reshape(hb, wb, -1)
-    thr = (np.median(blocks, axis=2) + min_gradient).astype(np.float32)
+    thr = kern._block_thresholds(np.ascontiguousarray(grad, dtype=np.float32), int(block_px), float(min_gradient))
     thr = cv2.blur(thr, (3, 3), borderType=cv2.BORDER_REPLICATE)
     full = np.repeat(np.repeat(thr, block_px, axis=0), block_px, axis=1)
     return full[:h, :w]
 
 
-def _best_per_cell(score: np.ndarray, cell: int) -> tuple[np.ndarray, np.ndarray]:
-    """Position (x, y) of the highest positive score in each ``cell x cell`` cell."""
-    h, w = score.shape
-    if cell <= 1:
-        ys, xs = np.nonzero(score > 0)
-        return xs, ys
-    hc, wc = -(-h // cell), -(-w // cell)
-    padded = np.full((hc * cell, wc * cell), -1.0, dtype=np.float32)
-    padded[:h, :w] = score
-    cells = padded.reshape(hc, cell, wc, cell).transpose(0, 2, 1, 3).reshape(hc, wc, cell * cell)
-    idx = np.argmax(cells, axis=2)
-    best = np.take_along_axis(cells, idx[..., None], axis=2)[..., 0]
-    cy, cx = np.nonzero(best > 0)
-    k = idx[cy, cx]
-    return cx * cell + k % cell, cy * cell + k // cell
+def _candidates(score: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels of positive score, row-major: (x, y, score)."""
+    ys, xs = np.nonzero(score > 0)
+    return np.ascontiguousarray(xs), np.ascontiguousarray(ys), np.ascontiguousarray(score[ys, xs], dtype=np.float32)
+
+
+def _best_per_cell(cand: tuple[np.ndarray, np.ndarray, np.ndarray], shape: tuple[int, int],
+                   cell: int) -> tuple[np.ndarray, np.ndarray]:
+    """Position (x, y) of the highest candidate in each ``cell x cell`` cell (cells in row-major order)."""
+    xs, ys, vs = cand
+    return kern._best_per_cell(xs, ys, vs, int(shape[0]), int(shape[1]), max(1, int(cell)))
 
 
 def select_rgb_pixels(grey: np.ndarray, config: RgbSelectionConfig, mask: np.ndarray | None = None,
@@ -82,12 +74,12 @@ def select_rgb_pixels(grey: np.ndarray, config: RgbSelectionConfig, mask: np.nda
     n_allowed = int(allowed.sum())
     if n_allowed == 0 or target <= 0:
         return np.zeros((0, 2), dtype=np.int32)
-    score = np.where(allowed & (grad > thr), grad, -1.0).astype(np.float32)
+    cand = _candidates(np.where(allowed & (grad > thr), grad, -1.0).astype(np.float32))
     cell = float(np.sqrt(n_allowed / target))
     best: tuple[np.ndarray, np.ndarray] | None = None
     for _ in range(6):
         c = max(1, int(round(cell)))
-        xs, ys = _best_per_cell(score, c)
+        xs, ys = _best_per_cell(cand, (h, w), c)
         n = len(xs)
         if best is None or abs(n - target) < abs(len(best[0]) - target):
             best = (xs, ys)
@@ -103,8 +95,8 @@ def select_rgb_pixels(grey: np.ndarray, config: RgbSelectionConfig, mask: np.nda
         taken[ys // c, xs // c] = True
         occupied = np.repeat(np.repeat(taken, c, 0), c, 1)[:h, :w]
         weak_thr = np.maximum(0.5 * thr, config.min_gradient)  # never below the absolute floor (noise)
-        weak = np.where(allowed & (grad > weak_thr) & ~occupied, grad, -1.0).astype(np.float32)
-        x2, y2 = _best_per_cell(weak, c)
+        weak = _candidates(np.where(allowed & (grad > weak_thr) & ~occupied, grad, -1.0).astype(np.float32))
+        x2, y2 = _best_per_cell(weak, (h, w), c)
         keep = np.argsort(-grad[y2, x2], kind="stable")[: target - len(xs)]
         xs, ys = np.concatenate([xs, x2[keep]]), np.concatenate([ys, y2[keep]])
     order = np.argsort(-grad[ys, xs], kind="stable")

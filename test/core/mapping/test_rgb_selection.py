@@ -69,3 +69,35 @@ def test_adaptive_threshold_follows_local_contrast():
     uv = select_rgb_pixels(img, RgbSelectionConfig(target_points=200, min_gradient=2.0))
     left = (uv[:, 0] < 80).sum()
     assert left > 0.3 * len(uv)
+
+
+@pytest.mark.parametrize("shape", [(240, 320), (237, 317), (31, 45)])
+def test_the_kernels_give_their_numpy_definitions_bit_for_bit(shape):
+    """Gradient norm, block medians (edge-replicated partial blocks) and the best pixel per cell, against the plain
+    numpy expressions they replaced (float32 throughout: a keyframe's points must not move with the speed-up)."""
+    from atsvo_ros.core.mapping import rgb_selection as rs
+
+    rng = np.random.default_rng(shape[1])
+    img = (rng.random(shape) * 255).astype(np.float32)
+    img[:, : shape[1] // 3] = np.round(img[:, : shape[1] // 3] / 64) * 64  # ties and flat parts
+    gx, gy = np.zeros_like(img), np.zeros_like(img)
+    gx[:, 1:-1] = 0.5 * (img[:, 2:] - img[:, :-2])
+    gy[1:-1, :] = 0.5 * (img[2:, :] - img[:-2, :])
+    grad = np.sqrt(gx * gx + gy * gy)
+    assert np.array_equal(gradient_magnitude(img), grad)
+    for block in (16, 7):
+        hb, wb = -(-shape[0] // block), -(-shape[1] // block)
+        padded = np.pad(grad, ((0, hb * block - shape[0]), (0, wb * block - shape[1])), mode="edge")
+        blocks = padded.reshape(hb, block, wb, block).transpose(0, 2, 1, 3).reshape(hb, wb, -1)
+        assert np.array_equal(rs.kern._block_thresholds(grad, block, 7.0), (np.median(blocks, axis=2) + 7.0))
+    score = np.where(grad > 20, grad, -1.0).astype(np.float32)
+    for cell in (1, 3, 8):
+        hc, wc = -(-shape[0] // cell), -(-shape[1] // cell)
+        padded = np.full((hc * cell, wc * cell), -1.0, np.float32)
+        padded[: shape[0], : shape[1]] = score
+        cells = padded.reshape(hc, cell, wc, cell).transpose(0, 2, 1, 3).reshape(hc, wc, cell * cell)
+        idx = np.argmax(cells, axis=2)
+        cy, cx = np.nonzero(np.take_along_axis(cells, idx[..., None], axis=2)[..., 0] > 0)
+        k = idx[cy, cx]
+        xs, ys = rs._best_per_cell(rs._candidates(score), shape, cell)
+        assert np.array_equal(xs, cx * cell + k % cell) and np.array_equal(ys, cy * cell + k // cell)
