@@ -37,7 +37,7 @@ from atsvo_ros.io.trajectory import Trajectory
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.sim.motion import PHASES
 from atsvo_ros.sim.rgbd import DepthModel
-from atsvo_ros.sim.sequence import SequenceSpec, make_simulation, model_key, spec_key
+from atsvo_ros.sim.sequence import SequenceSpec, make_simulation, model_key, spec_key, with_sensors
 from atsvo_ros.sim.stereo import StereoModel
 from atsvo_ros.tools._cli import add_config_args, run
 from atsvo_ros.tools.demo import cache_dir
@@ -161,18 +161,22 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
                  overrides: dict[str, Any] | None = None, width: int | None = None, height: int | None = None,
                  progress: bool = True, use_imu: bool = False, loss_limit_cm: float = 10.0,
                  use_events: bool = False, flood_factor: float = 1.0, stamp_jitter_s: float = 0.0,
-                 stamp_latency_s: float = 0.0, depth: str | None = None) -> dict[str, Any]:
+                 stamp_latency_s: float = 0.0, depth: str | None = None,
+                 sensors: dict[str, float] | None = None) -> dict[str, Any]:
     """Simulate (or load) one sequence, track it through the runtime, score it; a flat dict of figures.
 
     ``stamp_jitter_s`` / ``stamp_latency_s`` > 0 stamp the RGB-D frames as a host-stamping driver does
     (``RgbModel.stamp_jitter_s`` / ``stamp_latency_s``): the images stay on the frame clock, the poses are
     scored against the ground truth at the times they are published at. ``depth``: the simulator's depth
     sensor (``d455`` or ``sharp``; default the layout's, the D455). The figures include, per motion phase
-    (stance, flight, landing), the ATE and RPE per frame of that phase's frames (``phases``).
+    (stance, flight, landing), the ATE and RPE per frame of that phase's frames (``phases``). ``sensors``: other
+    sensor settings, the keywords of :func:`~atsvo_ros.sim.sequence.with_sensors` (harder ones: a longer exposure, a
+    higher contrast threshold, more noise, a dimmer room).
     """
 
     spec = SequenceSpec(scenario=scenario, duration_s=duration_s, seed=seed, config=config, width=width,
                         height=height, depth=depth)
+    spec = with_sensors(spec, **(sensors or {}))
     # the events are simulated in a thread beside the frames: each stream keeps ~1.3-1.5 of the 2 cores busy
     with ThreadPoolExecutor(1, thread_name_prefix="atsvo-sim-events") as pool:
         events_job = pool.submit(simulated_events, spec, progress) if use_events else None
@@ -225,6 +229,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     flagged = first_bad is None or any(s != "ok" for s in statuses[1:max(first_bad, 1) + 1])
     return {
         "scenario": scenario, "seed": seed, "duration_s": duration_s, "frames": len(results), "imu": use_imu,
+        "sensors": dict(sensors or {}),
         "ate_rmse_cm": m["ate_rmse_m"] * 100.0, "rpe_deg_per_frame": m["rpe_rot_deg_per_frame"],
         "rpe_cm_per_frame": m["rpe_trans_cm_per_frame"], "rpe_deg_per_deg": m["rpe_rot_deg_per_deg"],
         # what the line printed per sequence shows: the RMSE (atsvo-replay's statistic), the alignment, the association
@@ -275,11 +280,25 @@ def add_tracking_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stamp-latency", type=float, default=0.0, metavar="S",
                    help="a constant S seconds more on every stamp, besides the jitter (TUM's Kinect: ~0.010; "
                         "the odometry takes it out with --set rgb_camera.time_offset_s=-S)")
+    p.add_argument("--exposure", type=float, default=None, metavar="S",
+                   help="colour exposure time in s (atsvo-sim's; default 0.008): more blur")
+    p.add_argument("--contrast", type=float, default=None, help="event contrast threshold C+ = C- (default 0.2)")
+    p.add_argument("--noise-rate", type=float, default=None, metavar="HZ",
+                   help="event background activity per pixel and second (default 0.1)")
+    p.add_argument("--ir-ambient", type=float, default=None,
+                   help="the room's IR light against the D455's projector (default 0.25; lower: dimmer, more smear)")
     p.add_argument("--loss-limit-cm", type=float, default=10.0,
                    help="position error by which the status must have left ok (default 10)")
     p.add_argument("--json", default=None, help="write the per-sequence figures to this file")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     add_config_args(p, default="synthetic")
+
+
+def sensor_settings(args: argparse.Namespace) -> dict[str, float]:
+    """The sensor settings given on the command line, as :func:`~atsvo_ros.sim.sequence.with_sensors` keywords."""
+    given = {"exposure_s": args.exposure, "contrast": args.contrast, "noise_rate_hz": args.noise_rate,
+             "ambient_ir": args.ir_ambient}
+    return {k: float(v) for k, v in given.items() if v is not None}
 
 
 def _fmt(v: Any, f: str) -> str:
@@ -295,7 +314,7 @@ def main_tracking(args: argparse.Namespace) -> int:
             r = run_sequence(scenario, seed, args.duration, args.config, overrides, args.width, args.height,
                              progress=not args.quiet, use_imu=args.imu, loss_limit_cm=args.loss_limit_cm,
                              use_events=args.events, flood_factor=args.flood, stamp_jitter_s=args.stamp_jitter,
-                             stamp_latency_s=args.stamp_latency)
+                             stamp_latency_s=args.stamp_latency, sensors=sensor_settings(args))
             rows.append(r)
             print(sequence_line(r), flush=True)
     med = [r["track_ms_median"] for r in rows if r["track_ms_median"] is not None]

@@ -515,6 +515,24 @@ def _ahead(items: Iterator, depth: int = 4) -> Iterator:
         stop.set()
 
 
+def with_sensors(spec: SequenceSpec, exposure_s: float | None = None, contrast: float | None = None,
+                 noise_rate_hz: float | None = None, ambient_ir: float | None = None) -> SequenceSpec:
+    """``spec`` with other sensor settings (None keeps the spec's): the colour exposure (blur), the event contrast
+    threshold (C+ = C-), the event camera's background activity per pixel and second, and the room's IR light against
+    the D455's projector (lower: a dimmer room, longer IR exposures, more smear). ``atsvo-sim`` and ``atsvo-bench
+    tracking`` take them as ``--exposure``, ``--contrast``, ``--noise-rate`` and ``--ir-ambient``."""
+    events: dict[str, float] = {}
+    if contrast is not None:
+        events.update(contrast_pos=float(contrast), contrast_neg=float(contrast))
+    if noise_rate_hz is not None:
+        events["noise_rate_hz"] = float(noise_rate_hz)
+    return replace(
+        spec, exposure_s=spec.exposure_s if exposure_s is None else float(exposure_s),
+        event_model=replace(spec.event_model, **events),
+        stereo_model=spec.stereo_model if ambient_ir is None else replace(spec.stereo_model,
+                                                                                     ambient_ir=float(ambient_ir)))
+
+
 def spec_key(spec: SequenceSpec, imu: bool = True) -> str:
     """``repr(spec)``, or with ``imu=False`` its fields but the IMU's (for what does not depend on the IMU)."""
     if imu:
@@ -537,4 +555,5 @@ def make_simulation(spec: SequenceSpec, scene: Scene | None = None) -> Simulatio
 
 __all__ = ["DEPTH_MODELS", "MAX_DURATION_S", "MAX_RATE_HZ", "MAX_SEED", "MAX_TEXTURE_SIZE", "MIN_EVENT_PACKET_S",
            "FrameReport", "GroundTruth", "ImuBatch", "ImuModel", "RgbdFrame", "SequenceSpec", "SimRig", "Simulation",
-           "iter_sequence", "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig", "spec_key"]
+           "iter_sequence", "make_motion", "make_scene", "make_simulation", "model_key", "sequence_rig", "spec_key",
+           "with_sensors"]

@@ -25,6 +25,7 @@ from atsvo_ros.sim.sequence import (
     MAX_TEXTURE_SIZE,
     MIN_EVENT_PACKET_S,
     SequenceSpec,
+    with_sensors,
 )
 from atsvo_ros.sim.stereo import MAX_IR_LIGHT, StereoModel
 from atsvo_ros.sim.writer import EVENT_ENCODINGS, EVENT_MSGS, FORMATS, write_sequence
@@ -68,6 +69,7 @@ def _main(args: argparse.Namespace) -> int:
                         config=args.config, width=args.width, height=args.height, rate_hz=args.rate,
                         exposure_s=args.exposure, gt_rate_hz=args.gt_rate, event_packet_s=args.packet_ms * 1e-3,
                         event_scale=args.event_scale, texture_size=args.texture_size, imu=not args.no_imu)
+    spec = with_sensors(spec, contrast=args.contrast, noise_rate_hz=args.noise_rate, ambient_ir=args.ir_ambient)
     spec = dataclasses.replace(spec, event_model=_event_model(spec.event_model, args))
     if args.rgb_readout or args.rgb_stamp_jitter or args.rgb_stamp_latency:
         spec = dataclasses.replace(spec, rgb_model=dataclasses.replace(
@@ -76,8 +78,6 @@ def _main(args: argparse.Namespace) -> int:
     stereo: dict = {}
     if args.ir_exposure is not None:
         stereo["exposure_s"] = args.ir_exposure
-    if args.ir_ambient is not None:
-        stereo["ambient_ir"] = args.ir_ambient
     if args.depth_phase is not None:
         stereo["phase_s"] = args.depth_phase
     spec = dataclasses.replace(spec, depth=args.depth,
@@ -94,13 +94,9 @@ def _main(args: argparse.Namespace) -> int:
 
 
 def _event_model(em: EventModel, args: argparse.Namespace) -> EventModel:
-    """The default event model with the command line's overrides (a new scan period keeps the column sweep's
-    share of it)."""
+    """The event model with the command line's readout overrides (a new scan period keeps the column sweep's
+    share of it; contrast and noise go through :func:`~atsvo_ros.sim.sequence.with_sensors`)."""
     changes: dict = {}
-    if args.contrast is not None:
-        changes.update(contrast_pos=args.contrast, contrast_neg=args.contrast)
-    if args.noise_rate is not None:
-        changes["noise_rate_hz"] = args.noise_rate
     if args.refractory_us is not None:
         changes["refractory_s"] = args.refractory_us * 1e-6
     if args.scan_period_us is not None:

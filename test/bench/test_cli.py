@@ -27,3 +27,17 @@ def test_an_unusable_out_is_refused_before_the_benchmark_runs(tmp_path, capsys, 
     assert main(["real", str(tmp_path), "--no-paper", "--out", str(existing), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert err.strip() == f"atsvo-bench: error: --out {existing} is a file, not a folder", err
+
+
+def test_the_tracking_benchmark_takes_the_sensor_settings():
+    """--exposure / --contrast / --noise-rate / --ir-ambient reach the simulated sequence (and its cache key)."""
+    from atsvo_ros.bench.tracking import _cache_file, sensor_settings
+    from atsvo_ros.sim.sequence import SequenceSpec, with_sensors
+
+    args = build_parser().parse_args(["tracking", "--exposure", "0.015", "--contrast", "0.3", "--noise-rate", "1",
+                                      "--ir-ambient", "0.1"])
+    given = sensor_settings(args)
+    assert given == {"exposure_s": 0.015, "contrast": 0.3, "noise_rate_hz": 1.0, "ambient_ir": 0.1}
+    assert sensor_settings(build_parser().parse_args(["tracking"])) == {}
+    spec = SequenceSpec(scenario="backflip", duration_s=3.0, seed=1)
+    assert _cache_file(with_sensors(spec, **given)) != _cache_file(spec)

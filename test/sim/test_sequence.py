@@ -14,7 +14,15 @@ from atsvo_ros.errors import SimulationError
 from atsvo_ros.sim.events import EventModel
 from atsvo_ros.sim.rgbd import DepthModel
 from atsvo_ros.sim.scene import build_scene
-from atsvo_ros.sim.sequence import GroundTruth, RgbdFrame, SequenceSpec, Simulation, iter_sequence, sequence_rig
+from atsvo_ros.sim.sequence import (
+    GroundTruth,
+    RgbdFrame,
+    SequenceSpec,
+    Simulation,
+    iter_sequence,
+    sequence_rig,
+    with_sensors,
+)
 
 TINY = {"width": 64, "event_scale": 0.25, "texture_size": 32, "gt_rate_hz": 200.0}
 
@@ -294,3 +302,19 @@ def test_the_robot_layout_gets_the_d455_depth_and_mvsec_the_sharp_one():
         SequenceSpec(depth="kinect")
     with pytest.raises(SimulationError, match="robot layout"):
         SequenceSpec(layout="mvsec", depth="d455")
+
+
+def test_with_sensors_sets_the_harder_settings_and_keeps_the_rest():
+    """The settings a harder held-out run changes (exposure, contrast, noise, the room's IR light), each checked
+    by its model; None keeps the spec's."""
+    spec = SequenceSpec(scenario="bound", duration_s=1.0, seed=4)
+    assert with_sensors(spec) == spec
+    hard = with_sensors(spec, exposure_s=0.015, contrast=0.3, noise_rate_hz=1.0, ambient_ir=0.1)
+    assert (hard.exposure_s, hard.event_model.contrast_pos, hard.event_model.contrast_neg) == (0.015, 0.3, 0.3)
+    assert hard.event_model.noise_rate_hz == 1.0 and hard.stereo_model.ambient_ir == 0.1
+    assert dataclasses.replace(hard, exposure_s=spec.exposure_s, event_model=spec.event_model,
+                               stereo_model=spec.stereo_model) == spec
+    with pytest.raises(SimulationError):
+        with_sensors(spec, exposure_s=0.05)  # longer than a 30 Hz frame period
+    with pytest.raises(SimulationError):
+        with_sensors(spec, contrast=float("nan"))
