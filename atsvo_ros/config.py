@@ -226,6 +226,13 @@ class TrackerConfig:
     feature_check_deg: float = _f(4.0, 0.0, 180.0, doc="a frame that turned more than this since the previous one "
                                   "is checked against ORB matches to the last trusted frame (PnP on its depth), and "
                                   "a frame the checks reject is tracked again from that pose; 0 = off")
+    feature_check_m: float = _f(0.03, 0.0, 10.0, doc="a frame whose camera centre is further than this from the "
+                                "constant-velocity prediction is checked as well: a wrong optimum that takes a turn "
+                                "for a slide turns too little to be checked (fr1_rpy every 5th frame: 2.8 deg and "
+                                "7.4 cm estimated where the camera turned 6.9 deg and moved 1.7 cm). 3 cm is 2.8 g "
+                                "over a 30 Hz frame, beyond a hand-held camera. Every 5th from frames 1 / 2 / 4: "
+                                "2.51 / 2.78 / 29.7 -> 1.43 / 1.45 / 2.02 cm, wrong-but-ok 2 / 2 / 2 -> 0; "
+                                "fr1_rpy_300, every 2nd, 3rd, 4th unchanged; 0 = off")
     feature_points: int = _f(500, 100, 10000, doc="ORB keypoints per frame for feature_check_deg (matching costs "
                              "grow with their square: 3.5 ms for 500, 14 ms for 1000)")
     feature_level: int = _f(1, 0, 3, doc="pyramid level the ORB features are taken on (1 = half resolution: "

@@ -1,8 +1,9 @@
 """The odometry's use of feature matches (:mod:`~atsvo_ros.core.tracking.features`): a rescue and a check.
 
 Kept apart from direct tracking on purpose: features are computed only for a frame whose direct pose
-is in doubt (the checks rejected it, or it turned more than ``tracker.feature_check_deg`` since the
-previous frame), and for the previous frame once; a slow sequence never pays for them.
+is in doubt (the checks rejected it, it turned more than ``tracker.feature_check_deg`` since the
+previous frame, or its camera centre left the constant-velocity prediction by ``tracker.feature_check_m``),
+and for the previous frame once; a slow sequence never pays for them.
 """
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.geometry import rotation_angle_rad
+from atsvo_ros.core.geometry import camera_centre, rotation_angle_rad
 from atsvo_ros.core.image.frontend import PreparedFrame
 from atsvo_ros.core.tracking.features import FeatureMatcher, FrameFeatures
 
@@ -32,6 +33,7 @@ class FeatureAssist:
         self.at_colour_time = at_colour_time
         self.enabled = cfg.feature_check_deg > 0
         self.check_deg = cfg.feature_check_deg
+        self.check_m = cfg.feature_check_m
         self.level = min(cfg.feature_level, len(cameras) - 1)
         self.matcher = FeatureMatcher(cameras[self.level], cfg.feature_points) if self.enabled else None
         self._prev: tuple[PreparedFrame, np.ndarray] | None = None
@@ -71,9 +73,15 @@ class FeatureAssist:
         T_rot[:3, 3] = -T[:3, :3] @ np.asarray(centre_w, np.float64)
         return [T, T_rot]
 
-    def wants_check(self, T_c_w: np.ndarray, T_last_w: np.ndarray) -> bool:
-        """Whether a pose this far (in rotation) from the last one is checked against the features."""
-        return self.enabled and self._prev is not None and rotation_between_deg(T_c_w, T_last_w) > self.check_deg
+    def wants_check(self, T_c_w: np.ndarray, T_last_w: np.ndarray, T_pred_w: np.ndarray | None = None) -> bool:
+        """Whether a pose is checked against the features: it turned more than ``tracker.feature_check_deg`` since
+        ``T_last_w``, or its camera centre is more than ``tracker.feature_check_m`` from the prediction ``T_pred_w``."""
+        if not self.enabled or self._prev is None:
+            return False
+        if rotation_between_deg(T_c_w, T_last_w) > self.check_deg:
+            return True
+        return (T_pred_w is not None and self.check_m > 0
+                and float(np.linalg.norm(camera_centre(T_c_w) - camera_centre(T_pred_w))) > self.check_m)
 
     def end_frame(self, frame: PreparedFrame, T_c_w: np.ndarray, trusted: bool) -> None:
         """The frame is done: later frames match against it when its pose is trusted (else against the last

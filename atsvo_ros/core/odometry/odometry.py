@@ -245,7 +245,8 @@ class Odometry:
                 return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame, raw, moved)
             out, fused, status = best
         # without a gyro nothing else vouches for a fast frame's rotation (with one, the gyro check does)
-        if status is not TrackingStatus.DEGRADED and gyro is None and self.features.wants_check(out.T_c_w, last):
+        if (status is not TrackingStatus.DEGRADED and gyro is None
+                and self.features.wants_check(out.T_c_w, last, predicted)):
             out, status = self._feature_check(prepared, out, status, last, rs, priors, ev_frame)
         if not self.tracking.colour_usable(prepared) and status is not TrackingStatus.DEGRADED:
             # one sensor is blind: the pose rests on depth (and events) alone, and the map is left as it is
