@@ -104,13 +104,13 @@ def test_subsampled_fr1_rpy_is_tracked_and_never_wrong_but_ok(rpy_folder, tmp_pa
     assert not wrong_but_ok(folder, res)
 
 
-def test_every_5th_frame_from_other_offsets_is_mostly_ok_and_at_most_once_wrong_but_ok(rpy_folder, tmp_path):
+def test_every_5th_frame_from_other_offsets_is_mostly_ok_and_never_wrong_but_ok(rpy_folder, tmp_path):
     """Every 5th frame from frames 1, 2 and 3 (8-23 deg per frame): the fast frames the features cannot vouch for.
 
     With the opt-in tracker.feature_unverified_deg at 8 (off by default: it costs the simulated backflips without
-    an IMU, see its doc). Without it 2 + 2 + 2 frames are reported ok while wrong (2.5-4 deg on 8-24 deg turns;
-    mutation: ``assert 4 <= 1``); degrading a turn over 8 deg that no feature match checks leaves at most one.
-    Measured on these sequences (tuned on them: none of fr1_rpy is held out).
+    an IMU, see its doc). Measured: 1.32 / 1.46 / 2.21 cm, 56-57 of 60 ok, no frame reported ok while wrong. Without
+    it 0 + 0 + 2 such frames (mutation: ``assert not [(3, 24, ...), (3, 58, ...)]``; before the centre check,
+    tracker.feature_check_m, 2 + 2 + 2). Measured on these sequences (tuned on them: none of fr1_rpy is held out).
     """
     config = load_config("tum_fr1", overrides={"tracker.feature_unverified_deg": 8.0})
     wrong = []
@@ -121,7 +121,7 @@ def test_every_5th_frame_from_other_offsets_is_mostly_ok_and_at_most_once_wrong_
         assert res.statuses.count("ok") >= 0.9 * len(res.statuses), {s: res.statuses.count(s) for s in res.statuses}
         assert res.metrics["ate_rmse_m"] <= 0.03, (offset, res.metrics["ate_rmse_m"])
         wrong += [(offset, *w) for w in wrong_but_ok(folder, res)]
-    assert len(wrong) <= 1, wrong
+    assert not wrong, wrong
 
 
 @pytest.mark.parametrize("offset", [2, 4])
