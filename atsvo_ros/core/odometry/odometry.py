@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from atsvo_ros.config import AtsvoConfig
+from atsvo_ros.config import AtsvoConfig, TrackerConfig
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.events.frontend import EventFrame, EventFrontEnd
@@ -64,6 +64,14 @@ class _Anchor:
     raw: PreparedFrame
     T_c_w: np.ndarray
     turned: bool  # the map's depth was turned by the gyro (False: no gyro over its offset yet)
+
+
+def _starved_map(out: TrackingOutcome, cfg: TrackerConfig) -> bool:
+    """Whether colour tracking failed for want of map points alone: fewer visible than ``tracker.min_inliers``, and
+    the visible ones agreeing with the image (inliers above ``tracker.min_inlier_fraction``)."""
+    rgb = None if out.result is None else out.result.blocks.get("rgb")
+    return (rgb is not None and 0 < rgb.n_visible < cfg.min_inliers
+            and rgb.inlier_fraction >= cfg.min_inlier_fraction)
 
 
 def _best_attempt(attempts: list[tuple[TrackingOutcome, bool, TrackingStatus]]
@@ -227,7 +235,10 @@ class Odometry:
                 self.tracking.set_event_map(self.event_side.event_map())
                 if self.tracking.uses_events(ev_frame):
                     retry = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
-                    attempts.append((retry, True, TrackingStatus.DEGRADED))
+                    # A slow frame whose colour agreed with the few map points it saw: the map ran out (a long
+                    # flight's keyframes took blurred colour), not the image. Trusted, it can refill the map.
+                    starved = not fast and _starved_map(out, self.config.tracker)
+                    attempts.append((retry, True, TrackingStatus.OK if starved else TrackingStatus.DEGRADED))
             if all(a[0].verdict.level != OK for a in attempts):
                 # Direct alignment settled wrong from the predictions: start it where the feature matches put the
                 # frame (a fast turn's answer lies outside its basin of convergence)

@@ -134,3 +134,28 @@ def test_the_imu_carries_the_flight_with_the_gyros_prior_and_the_accelerometers_
     assert flip["ate_rmse_cm"] < 8.0, flip["ate_rmse_cm"]
     assert flip["modes"].get("fused", 0) >= 10, flip["modes"]
     assert not any(flip["statuses"].get(s, 0) for s in ("lost", "reinitialised"))
+
+
+@pytest.fixture(scope="module")
+def harder_flip(tmp_path_factory):
+    """A 3 s flip on harder sensors (15 ms exposure, contrast threshold 0.3, 1 noise event per pixel and second, a
+    dim room), fused, the IMU fed: the flight's keyframes take blurred colour and few points."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("ATSVO_CACHE", str(tmp_path_factory.mktemp("hardflip")))
+    try:
+        return run_sequence(scenario="backflip", seed=1, duration_s=3.0, width=320, height=240, progress=False,
+                            use_events=True, use_imu=True, sensors={"exposure_s": 0.015, "contrast": 0.3,
+                                                                    "noise_rate_hz": 1.0, "ambient_ir": 0.1})
+    finally:
+        mp.undo()
+
+
+def test_a_map_the_flight_starved_is_refilled_once_the_robot_stands(harder_flip):
+    """After the landing the map holds 42 points, 19 in view: colour alone fails for want of points while the few it
+    sees agree with the image, and the fused retry holds the pose. That frame is trusted (it is slow and its colour
+    is sharp), so it refills the map and colour tracking takes over again. Measured: every frame ok (at 640x480,
+    tuning seed 1: 2.61 -> 2.90 cm). Mutation (such a frame stays degraded, as every fused retry did before): the
+    last 25 frames, the robot standing, stay degraded because degraded frames make no keyframe."""
+    flip = harder_flip
+    assert flip["statuses"].get("degraded", 0) <= 3, flip["statuses"]
+    assert not any(flip["statuses"].get(s, 0) for s in ("lost", "reinitialised"))
