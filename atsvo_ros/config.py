@@ -247,7 +247,8 @@ class TrackerConfig:
     feature_unverified_deg: float = _f(0.0, 0.0, 180.0, doc="a checked frame that turned more than this with no "
                                        "feature match to check it (too few keypoints matched) is degraded (0 = off). "
                                        "Opt-in: at 8, fr1_rpy every 5th from frames 1-3 went from 2 + 2 + 2 "
-                                       "wrong-but-ok frames to 1 + 0 + 0, but the held-out simulated backflips "
+                                       "wrong-but-ok frames to 1 + 0 + 0 (with feature_check_m: 0 + 0 + 2 to 0 + 0 "
+                                       "+ 0), but the held-out simulated backflips "
                                        "without an IMU went 8.8 -> 20.0 cm fused with 28 frames lost or "
                                        "re-initialised (blurred flips leave nothing to match)")
     feature_disagreement_m: float = _f(0.08, 0.001, 10.0, doc="... or whose camera centres differ by more than "
