@@ -486,6 +486,13 @@ class NodeConfig:
                             "builder) in a child process, started and warmed up before subscribing; the worker then no "
                             "longer waits for the GIL that the executor's callbacks hold (docs/nodes.md). No debug "
                             "images in this mode (the time surface lives in the child); about 250 MB more memory")
+    nice: int = _f(0, -20, 19, doc="nice value for every thread of the node process, set before the odometry's "
+                   "threads start; 0 = as started. Below 0 the node outweighs best-effort work on a shared "
+                   "computer (nice -10: 9.3x a nice-0 process's CPU share); needs root, CAP_SYS_NICE or a nice "
+                   "limit, else one warning and it runs on as started (docs/nodes.md)")
+    realtime_priority: int = _f(0, 0, 99, doc="SCHED_RR real-time priority for every thread of the node process "
+                                "(1-99; 0 = off): runs before all normal-priority work, the kernel's RT throttling "
+                                "still leaving it 5 %. Needs root, CAP_SYS_NICE or an rtprio limit, else one warning")
     mapping_timeout_s: float = _f(5.0, 0.0, 600.0, lo_open=True,
                                   doc="tracking_node + mapping_node: a keyframe request unanswered this long is given "
                                       "up (counted); also the longest a synchronous insert waits")

@@ -2,7 +2,7 @@
 
     ros2 launch atsvo_ros atsvo.launch.py [config:=/path/params.yaml] [mode:=fused|rgbd] [use_sim_time:=false]
         [split:=false] [rgb_topic:=...] [depth_topic:=...] [events_topic:=...] [imu_topic:=...]
-        [odometry_topic:=...] [fastdds_profile:=...]
+        [odometry_topic:=...] [fastdds_profile:=...] [realtime_priority:=0]
 
 Default: ``atsvo_node`` (tracking and mapping in one process, snapshots shared in memory, the lowest
 latency); ``split:=true`` starts ``tracking_node`` and ``mapping_node`` instead. The parameter file
@@ -10,6 +10,8 @@ latency); ``split:=true`` starts ``tracking_node`` and ``mapping_node`` instead.
 configuration checked with ``atsvo-info --config FILE`` runs unchanged on the robot; topic arguments
 left empty keep the file's topics. Our processes get the Fast DDS profile config/fastdds_shm.xml;
 the camera driver must be started with it too (``FASTRTPS_DEFAULT_PROFILES_FILE``), see the README.
+``realtime_priority:=10`` runs the odometry's threads under SCHED_RR before the robot's best-effort work
+(``node.realtime_priority``; needs CAP_SYS_NICE or an rtprio limit; docs/nodes.md).
 """
 from __future__ import annotations
 
@@ -34,6 +36,9 @@ def _nodes(context, *args, **kwargs) -> list[Node]:
         value = LaunchConfiguration(arg).perform(context)
         if value:
             params[key] = value
+    priority = int(LaunchConfiguration("realtime_priority").perform(context) or 0)
+    if priority:
+        params["node.realtime_priority"] = priority
     env = {"FASTRTPS_DEFAULT_PROFILES_FILE": LaunchConfiguration("fastdds_profile").perform(context)}
     common = {"package": "atsvo_ros", "output": "screen", "parameters": [config, params], "additional_env": env}
     if LaunchConfiguration("split").perform(context) == "true":
@@ -54,6 +59,8 @@ def generate_launch_description() -> LaunchDescription:
                               description="true: tracking_node + mapping_node in two processes"),
         DeclareLaunchArgument("fastdds_profile", default_value=os.path.join(share, "config", "fastdds_shm.xml"),
                               description="Fast DDS profile of our processes (64 MiB shared memory for images)"),
+        DeclareLaunchArgument("realtime_priority", default_value="0",
+                              description="SCHED_RR priority of the odometry's threads, 1-99 (0: the config file's)"),
         *(DeclareLaunchArgument(arg, default_value="", description=f"{key} (empty: the config file's)")
           for arg, key in TOPIC_ARGUMENTS.items()),
         OpaqueFunction(function=_nodes),

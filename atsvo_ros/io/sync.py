@@ -18,7 +18,7 @@ bag replay, fed in log-time order) stamp time is the arrival time.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,6 +46,17 @@ class SyncStats:
     missing_depth: int = 0
 
 
+def _percentile_25(values: Iterable[int]) -> int:
+    """``int(np.percentile(values, 25))``, exactly (numpy's linear rule), in plain Python: called for every IMU
+    sample and image, numpy's overhead on 32 values was a tenth of the node's executor thread (py-spy)."""
+    v = sorted(values)
+    index = 0.25 * (len(v) - 1)
+    lo = int(index)
+    t = index - lo
+    a, b = float(v[lo]), float(v[min(lo + 1, len(v) - 1)])
+    return int(b - (b - a) * (1.0 - t)) if t >= 0.5 else int(a + (b - a) * t)
+
+
 class StampGaps:
     """Counts the images missing from a periodic stream from gaps between the stamps that arrive.
 
@@ -69,7 +80,7 @@ class StampGaps:
         """The stream's period as measured (None before three intervals)."""
         if len(self._intervals) < 3:
             return None
-        return int(np.percentile(np.fromiter(self._intervals, np.int64), 25))
+        return _percentile_25(self._intervals)
 
     def add(self, stamp_ns: int) -> None:
         """One image's stamp, in arrival order."""

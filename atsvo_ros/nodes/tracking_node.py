@@ -66,7 +66,9 @@ from atsvo_ros.nodes._ros import (
     uint8_array,
 )
 from atsvo_ros.runtime.core_process import CoreHost
+from atsvo_ros.runtime.cpu_priority import raise_cpu_priority
 from atsvo_ros.runtime.frame_queue import DropOldestQueue, Worker
+from atsvo_ros.runtime.kernel_watch import LateKernels
 from atsvo_ros.runtime.mapping_remote import RemoteMapping, mapping_digest
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.runtime.types import FrameInput, RuntimeOutput
@@ -99,6 +101,10 @@ class TrackingNode(Node):
         self.config = cfg = declare_config(self)
         topics, nc = cfg.topics, cfg.node
         log = self.get_logger()
+        # before any thread of ours starts (warm-up, worker, mapping, the core's child process inherit it)
+        priority = raise_cpu_priority(nc.nice, nc.realtime_priority)
+        if priority is not None:
+            (log.info if priority.applied else log.warn)(priority.describe())
         self.fatal_error: BaseException | None = None
         self._mapping_mode = mapping
         self._on_snapshot = on_snapshot
@@ -198,6 +204,8 @@ class TrackingNode(Node):
         self._drops_reported = 0
         self.last: RuntimeOutput | None = None
         self.create_timer(nc.diagnostics_period_s, self._publish_diagnostics, callback_group=self._control_group)
+        # from here on no kernel should compile (in core_process mode they live in the child, warmed there)
+        self.late_kernels = LateKernels() if self._core_host is None else None
         self.worker.start()
         log.info(f"tracking: mode {cfg.mode if use_events or cfg.mode == 'rgbd' else 'rgbd (no event messages)'}, "
                  f"mapping {'in this process' if mapping == 'memory' else 'in mapping_node (topics)'}"
@@ -414,6 +422,7 @@ class TrackingNode(Node):
             "frames_without_events": sync.released_without_events, "late_events": sync.late_events,
             "event_time_offset_s": rt.event_time_offset_s,
             "bad_snapshots": self.bad_snapshots,
+            "late_kernels": self.late_kernels.count if self.late_kernels is not None else 0,
             "keyframes": getattr(rt.core, "n_keyframes", 0) if rt.core is not None else 0,
             "mapping": mapping, "tf": self.tf_route, "worker": "running" if self.worker.alive else "stopped",
             **{f"rate_{k}_hz": v for k, v in rates.items()},
@@ -426,6 +435,10 @@ class TrackingNode(Node):
         return values
 
     def _publish_diagnostics(self) -> None:
+        late = self.late_kernels.new() if self.late_kernels is not None else []
+        if late:  # a path the warm-up missed: the frame that took it stalled while numba compiled
+            self.get_logger().warn(f"numba compiled {len(late)} kernel(s) after the warm-up (a frame stalled for it): "
+                                   f"{', '.join(late)}")
         v = self.diagnostics_values()
         status = v["status"]
         level = OK

@@ -44,6 +44,12 @@ def test_messages_decode_in_stamp_order_after_a_serialization_round_trip(ros):
     np.testing.assert_array_equal(b.accel_m_s2, a[order])
     one = imu_from_msg(msgs[1])
     assert len(one) == 1 and one.t_first_ns == stamps[1]
+    for m in msgs:  # the one-message fast path gives what the batch path gives for [m], dtypes and shapes too
+        fast, batch = imu_from_msg(m), imu_from_msgs([m])
+        for name in ("stamps_ns", "gyro_rad_s", "accel_m_s2"):
+            x, y = getattr(fast, name), getattr(batch, name)
+            assert x.dtype == y.dtype and x.shape == y.shape
+            np.testing.assert_array_equal(x, y)
 
 
 def test_duck_typed_ros1_stamps_and_errors():

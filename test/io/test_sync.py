@@ -5,7 +5,7 @@ import numpy as np
 
 from atsvo_ros.config import RigConfig
 from atsvo_ros.core.events.batch import EventBatch
-from atsvo_ros.io.sync import FrameAssembler
+from atsvo_ros.io.sync import FrameAssembler, _percentile_25
 
 MS = 1_000_000
 
@@ -176,3 +176,14 @@ def test_the_assembler_reports_images_missing_from_either_stream():
         if k not in (6, 7):
             asm.add_depth(k * 33 * MS, _dep(1.0))
     assert (asm.stats.missing_rgb, asm.stats.missing_depth) == (1, 2)
+
+
+def test_the_stream_period_is_numpys_25th_percentile_exactly():
+    """StampGaps' plain-Python percentile (kept off numpy for speed) equals ``int(np.percentile(x, 25))``."""
+    rng = np.random.default_rng(3)
+    for n in range(3, 33):
+        for _ in range(200):
+            x = rng.choice([33_333_333, 33_366_667, 66_666_667], n) + rng.integers(-50_000, 50_000, n)
+            if rng.random() < 0.3:
+                x = rng.integers(1, 2_000_000_000, n)
+            assert _percentile_25(x.tolist()) == int(np.percentile(x, 25)), x

@@ -193,6 +193,8 @@ def _check_common(run: Run) -> None:
             "rate_event_msgs_hz", "rate_odometry_hz"} <= set(d) and d["mode"] in ("fused", "rgbd"), d
     # the worker's own CPU is part of its wall time per frame (the rest waited for a core or the GIL)
     assert 0.0 < float(d["worker_cpu_ms_mean"]) <= float(d["worker_ms_mean"]) * 1.01 + 0.1, d
+    # the warm-up compiled every kernel the run took: no frame stalled for numba (the node logs any it missed)
+    assert int(d["late_kernels"]) == 0, d
     # the last frame, whose events and IMU samples past its stamp never come, went out once the inputs fell silent
     assert int(d["frames_waiting"]) == 0, why
     assert len(run.statuses) == len(run.stamps) and run.probe.maps, "per-frame status or map missing"

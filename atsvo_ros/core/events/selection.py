@@ -119,7 +119,10 @@ def select_event_pixels_detailed(ats: np.ndarray, events: EventBatch | np.ndarra
     passed = on_mask & inside & (score > cfg.h)
     idx = np.flatnonzero(passed)
     order = idx[_best_first(score[idx])]
-    keep = _thin(cx, cy, order, int(cfg.min_distance_px), w, h, int(cfg.max_points))
+    # one layout whatever fired: nonzero gives strided views (C-contiguous only for 0-1 pixels), and a second
+    # signature compiled mid-run on a cold numba cache stalls the node (the warm-up compiles one)
+    keep = _thin(np.ascontiguousarray(cx), np.ascontiguousarray(cy), order, int(cfg.min_distance_px), w, h,
+                 int(cfg.max_points))
     selected = np.stack([cx[keep], cy[keep]], axis=1).astype(np.int64) if len(keep) else np.zeros((0, 2), np.int64)
     return EventSelection(mask, np.stack([cx, cy], axis=1), on_mask, score, passed, selected)
 

@@ -132,3 +132,17 @@ def test_selection_on_an_ats_of_moving_edges_lands_on_recent_edges():
     assert len(pts) > 5
     recent_cols = set(np.unique(b.x[b.t > t_q - cfg.window_fraction * ats.window_ns()]).tolist())
     assert set(pts[:, 0].tolist()) <= recent_cols
+
+
+def test_the_thinning_kernel_sees_one_array_layout_whatever_fired():
+    """One fired pixel or many, the kernel gets C-contiguous arrays: a second layout would compile mid-run (on a
+    cold numba cache a 1-3 s stall with the GIL held) where the nodes' warm-up compiled only the first."""
+    from atsvo_ros.core.events._selection_kernels import _thin
+
+    ats = _smooth_random_ats(1)
+    for n in (0, 1, 2, 300):
+        fired = np.zeros((H, W), bool)
+        fired.flat[np.random.default_rng(n).choice(H * W, n, replace=False)] = True
+        select_event_pixels(ats, fired, T, WINDOW)
+    layouts = {arg.layout for sig in _thin.signatures for arg in sig[:2]}
+    assert layouts == {"C"}, _thin.signatures
