@@ -30,8 +30,9 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, Si
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
-from atsvo_ros.config import TopicsConfig
+from atsvo_ros.config import NodeConfig, TopicsConfig
 from atsvo_ros.errors import AtsvoError
+from atsvo_ros.runtime.cpu_priority import raise_cpu_priority
 
 #: Seconds the clean-up after Ctrl-C may take (closing the worker, the executor, DDS) before the process dumps
 #: its threads' stacks to the log and ends with 1 (measured: well under 2 s on this machine).
@@ -164,6 +165,14 @@ class Window:
         return float(np.mean(np.fromiter(self._v, float))) if self._v else float("nan")
 
 
+def set_cpu_priority(node: Node, nc: NodeConfig) -> None:
+    """``node.nice`` / ``node.realtime_priority`` on every thread of the process, said in the node's log (one line;
+    a warning when refused). Call it before the node starts threads of its own: they inherit it."""
+    priority = raise_cpu_priority(nc.nice, nc.realtime_priority)
+    if priority is not None:
+        (node.get_logger().info if priority.applied else node.get_logger().warn)(priority.describe())
+
+
 def make_executor(kind: str, threads: int = 2) -> Any:
     """The executor named by ``node.executor`` (events, multi_threaded, single_threaded)."""
     if kind == "events":
@@ -278,4 +287,4 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
 
 __all__ = ["ERROR", "IMAGE_QOS", "LATCHED_QOS", "OK", "OUTPUT_QOS", "REQUEST_QOS", "RateMeter", "SENSOR_QOS",
            "STREAM_QOS", "TF_QOS", "WARN", "Window", "diagnostic_array", "event_message_class", "key_values",
-           "make_executor", "run_nodes", "stamp_msg", "uint8_array"]
+           "make_executor", "run_nodes", "set_cpu_priority", "stamp_msg", "uint8_array"]

@@ -34,9 +34,9 @@ from atsvo_ros.nodes._ros import (
     Window,
     diagnostic_array,
     run_nodes,
+    set_cpu_priority,
     uint8_array,
 )
-from atsvo_ros.runtime.cpu_priority import raise_cpu_priority
 from atsvo_ros.runtime.mapping_remote import MappingServer
 from atsvo_ros.runtime.warmup import warm_up
 
@@ -49,9 +49,7 @@ class MappingNode(Node):
         self.config = cfg = declare_config(self)
         topics = cfg.topics
         if serve:  # in atsvo_node the tracking node set it for the whole process
-            priority = raise_cpu_priority(cfg.node.nice, cfg.node.realtime_priority)
-            if priority is not None:
-                (self.get_logger().info if priority.applied else self.get_logger().warn)(priority.describe())
+            set_cpu_priority(self, cfg.node)
         self._T_odom_world = cfg.rig.T_base_rgb_matrix()  # odom = base at the first frame, world = its camera
         self.map_pub = self.create_publisher(PointCloud2, topics.map, LATCHED_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", OUTPUT_QOS)

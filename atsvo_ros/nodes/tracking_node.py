@@ -62,11 +62,11 @@ from atsvo_ros.nodes._ros import (
     event_message_class,
     input_qos,
     run_nodes,
+    set_cpu_priority,
     stamp_msg,
     uint8_array,
 )
 from atsvo_ros.runtime.core_process import CoreHost
-from atsvo_ros.runtime.cpu_priority import raise_cpu_priority
 from atsvo_ros.runtime.frame_queue import DropOldestQueue, Worker
 from atsvo_ros.runtime.kernel_watch import LateKernels
 from atsvo_ros.runtime.mapping_remote import RemoteMapping, mapping_digest
@@ -102,9 +102,7 @@ class TrackingNode(Node):
         topics, nc = cfg.topics, cfg.node
         log = self.get_logger()
         # before any thread of ours starts (warm-up, worker, mapping, the core's child process inherit it)
-        priority = raise_cpu_priority(nc.nice, nc.realtime_priority)
-        if priority is not None:
-            (log.info if priority.applied else log.warn)(priority.describe())
+        set_cpu_priority(self, nc)
         self.fatal_error: BaseException | None = None
         self._mapping_mode = mapping
         self._on_snapshot = on_snapshot

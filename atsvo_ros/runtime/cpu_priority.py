@@ -2,7 +2,7 @@
 
 On a robot the odometry shares the computer with other software. Under Linux's fair scheduler a busy process
 beside the node takes its share of a core whatever the node needs, and the node's frames queue and drop
-(docs/nodes.md: one CPU hog beside the RGB-D node on 2 cores, 71-76 % of frames answered). What robot stacks do
+(docs/nodes.md: one CPU hog beside the RGB-D node on 2 cores, 68-88 % of frames answered). What robot stacks do
 is give the estimator a higher priority than the best-effort work: a lower nice value (a larger CFS weight: nice
 -10 weighs 9.3x nice 0) or a real-time policy (SCHED_RR: runs before every normal thread; the kernel's RT
 throttling still leaves 5 % to the others). Both need privileges (root, ``CAP_SYS_NICE``, or ``nice`` / ``rtprio``
@@ -68,7 +68,7 @@ def raise_cpu_priority(nice: int = 0, realtime_priority: int = 0) -> PriorityRes
             except ProcessLookupError:  # the thread ended meanwhile
                 continue
             done += 1
-    except (PermissionError, AttributeError, OSError) as exc:  # AttributeError: no SCHED_RR on this platform
+    except (AttributeError, OSError) as exc:  # a refusal (PermissionError); AttributeError: no SCHED_RR here
         return PriorityResult(nice, realtime_priority, False, done, why=str(exc) or type(exc).__name__)
     return PriorityResult(nice, realtime_priority, True, done)
 
