@@ -69,6 +69,7 @@ setup(
         ],
         "test": [
             "pytest>=7",
+            "pytest-xdist>=3.5",  # the suite on every core (setup.cfg: -n auto, at most 4 workers)
             "ruff>=0.4",
             "hypothesis>=6.80",  # property-based tests of the decoders and SE(3) utilities
             "aedat>=2.0",

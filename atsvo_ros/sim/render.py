@@ -10,6 +10,7 @@ Shading: albedo x (ambient + Lambertian ceiling light with inverse-square fallof
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -281,14 +282,21 @@ class Renderer:
         self._tile_cone = cone + 0.01
         self._tile_boxes = np.zeros((n_tiles, max(scene.n_boxes, 1)), np.int64)
         self._tile_count = np.zeros(n_tiles, np.int64)
+        edges = np.linspace(0, n_tiles, n_threads + 1).astype(int)
+        self._tile_bands = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
         tex16 = np.round(np.clip(s.atlas.data, 0.0, 1.0) * 65535.0).astype(np.uint16)
         self._scene_args = (s.room_min, s.room_max, s.box_center, s.box_half, np.ascontiguousarray(s.box_cos_sin),
                             s.face_tex, s.face_texel_per_m, s.face_offset_m, s.face_tint, tex16,
                             s.atlas.offsets, s.atlas.sizes, s.light_pos, float(s.ambient), self._light_ref2)
         self._empty_rgb = np.zeros((0, 3), np.float32)
 
-    def render(self, T_world_cam: np.ndarray, rgb: bool = False):
-        """``(irradiance HxW float32, depth_m HxW float32[, rgb HxWx3 float32])`` at one pose."""
+    def render(self, T_world_cam: np.ndarray, rgb: bool = False,
+               then: Callable[[slice, np.ndarray, np.ndarray], None] | None = None):
+        """``(irradiance HxW float32, depth_m HxW float32[, rgb HxWx3 float32])`` at one pose.
+
+        ``then(band, grey, depth)``, if given, runs in each band's thread once that band is cast (``grey`` and
+        ``depth`` flat): per-pixel work on the image shares the threads instead of a pass of its own after them.
+        """
         cam = self.camera
         n = cam.width * cam.height
         grey = np.empty(n, np.float32)
@@ -310,23 +318,35 @@ class Renderer:
         Rz_inv[:, 2, 2] = 1.0
         box_rot = np.ascontiguousarray(Rz_inv @ R)
         box_lo = np.ascontiguousarray((Rz_inv @ -rel[:, :, None])[:, :, 0])
-        _cull_tiles(self._tile_axis, self._tile_cone, vis, box_cam, self._tile_boxes, self._tile_count)
+
+        def cull(tiles: slice) -> None:
+            _cull_tiles(self._tile_axis[tiles], self._tile_cone[tiles], vis, box_cam, self._tile_boxes[tiles],
+                        self._tile_count[tiles])
+
+        self._run(cull, self._tile_bands)
         a = self._scene_args
 
         def cast(band: slice) -> None:
             _cast(self.rays[band], self.pix_angle[band], self.pix_tile[band], R, t, *a[:5], self._tile_boxes,
                   self._tile_count, box_cam, box_rot, box_lo, *a[5:], grey[band], depth[band],
                   col[band] if rgb else col, rgb)
+            if then is not None:
+                then(band, grey, depth)
 
-        if self._pool is None:
-            cast(self._bands[0])
-        else:
-            for job in [self._pool.submit(cast, band) for band in self._bands]:
-                job.result()  # re-raises a failure of that band
+        self._run(cast, self._bands)
         shape = (cam.height, cam.width)
         if rgb:
             return grey.reshape(shape), depth.reshape(shape), col.reshape(shape + (3,))
         return grey.reshape(shape), depth.reshape(shape)
+
+    def _run(self, job: Callable[[slice], None], bands: list[slice]) -> None:
+        """``job`` on every band, on the pool's threads when there is one."""
+        if self._pool is None:
+            for band in bands:
+                job(band)
+            return
+        for done in [self._pool.submit(job, band) for band in bands]:
+            done.result()  # re-raises a failure of that band
 
 
 class MotionProbe:

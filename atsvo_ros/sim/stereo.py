@@ -244,9 +244,11 @@ class StereoDepthSensor:
         for j, T_w_l in enumerate(self.T_world_left(times)):
             for T_w_c, out, proj_dx in ((T_w_l, left, -m.projector_offset_m),
                                         (T_w_l @ self._T_left_right, right, m.baseline_m - m.projector_offset_m)):
-                albedo, depth = self._albedo.render(T_w_c)
-                kern._ir_irradiance(rays, depth.ravel(), albedo.ravel(), self._dots, cam.fx, cam.fy, cam.cx,
-                                    cam.cy, proj_dx, m.projector_power, m.ambient_ir, w, out)
+                def lit(band: slice, albedo: np.ndarray, depth: np.ndarray, out=out, proj_dx=proj_dx) -> None:
+                    kern._ir_irradiance(rays[band], depth[band], albedo[band], self._dots, cam.fx, cam.fy, cam.cx,
+                                        cam.cy, proj_dx, m.projector_power, m.ambient_ir, w, out[band])
+
+                _, depth = self._albedo.render(T_w_c, then=lit)  # the projector's light in the cast's threads
                 if out is left and j == len(times) // 2:
                     self._depth_prev = depth
         shape = (cam.height, cam.width)
