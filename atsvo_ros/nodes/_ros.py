@@ -26,7 +26,7 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
@@ -227,6 +227,22 @@ def _stack_file() -> Any:
         return None
 
 
+def spin_until_shutdown(executor: Executor, nodes: Sequence[Node]) -> None:
+    """Spin until rclpy shuts down (Ctrl-C, an external shutdown) or a node reports a fatal error.
+
+    Ctrl-C can shut the context down between the loop's ``rclpy.ok()`` and the executor building its wait set,
+    which rclpy then reports as an ``RCLError`` (the context is not valid); that is a shutdown like any other. An
+    ``RCLError`` while the context is still valid is a real failure and propagates.
+    """
+    while rclpy.ok() and not any(getattr(n, "fatal_error", None) for n in nodes):
+        try:
+            executor.spin_once(timeout_sec=0.2)
+        except RCLError:
+            if rclpy.ok():
+                raise
+            return
+
+
 def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | None = None,
               threads: int = 2, what: str = "") -> int:
     """Init rclpy, build the nodes, spin until Ctrl-C / shutdown, clean up; the process's exit code.
@@ -263,8 +279,7 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
         for n in nodes:
             executor.add_node(n)
         try:
-            while rclpy.ok() and not any(getattr(n, "fatal_error", None) for n in nodes):
-                executor.spin_once(timeout_sec=0.2)
+            spin_until_shutdown(executor, nodes)
         finally:
             if stacks_to is not None:
                 faulthandler.dump_traceback_later(SHUTDOWN_LIMIT_S, exit=True, file=stacks_to)
@@ -287,4 +302,4 @@ def run_nodes(prog: str, make: Callable[[], Sequence[Node]], args: list[str] | N
 
 __all__ = ["ERROR", "IMAGE_QOS", "LATCHED_QOS", "OK", "OUTPUT_QOS", "REQUEST_QOS", "RateMeter", "SENSOR_QOS",
            "STREAM_QOS", "TF_QOS", "WARN", "Window", "diagnostic_array", "event_message_class", "key_values",
-           "make_executor", "run_nodes", "set_cpu_priority", "stamp_msg", "uint8_array"]
+           "make_executor", "run_nodes", "set_cpu_priority", "spin_until_shutdown", "stamp_msg", "uint8_array"]
