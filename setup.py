@@ -70,6 +70,7 @@ setup(
         "test": [
             "pytest>=7",
             "pytest-xdist>=3.5",  # the suite on every core (setup.cfg: -n auto, at most 4 workers)
+            "pytest-timeout>=2.2",  # a test that hangs fails with every thread's stack (setup.cfg: timeout)
             "ruff>=0.4",
             "hypothesis>=6.80",  # property-based tests of the decoders and SE(3) utilities
             "aedat>=2.0",

@@ -84,3 +84,25 @@ def test_ci_runs_the_readme_test_command_with_the_ros_tests_required():
     assert command in readme and ci[-1] == command
     assert ci.index("source .ci/ros_env.sh  # pip install -e '.[ros]', builds the messages (cached), exports the "
                     "DDS settings") < ci.index("export ATSVO_REQUIRE_ROS=1") < len(ci) - 1
+
+
+def test_a_hung_test_fails_with_its_stack_and_the_run_goes_on(tmp_path):
+    """setup.cfg's limits under xdist: the hung test's stack reaches the log, it fails, the next test still runs."""
+    pytest.importorskip("pytest_timeout", reason="pytest-timeout is in the test extra")
+    (tmp_path / "test_hang.py").write_text(
+        "import threading\n\n"
+        "def test_hangs():\n    threading.Event().wait()\n\n"
+        "def test_after():\n    pass\n")
+    cfg = configparser.ConfigParser()
+    cfg.read(ROOT / "setup.cfg")
+    opts = cfg["tool:pytest"]
+    dump_s, kill_s = float(opts["faulthandler_timeout"]), float(opts["timeout"])
+    assert 0 < dump_s < kill_s and opts["timeout_method"] == "thread"  # the stack is written before the end
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "1",
+                           "-o", f"faulthandler_timeout={2 * dump_s / kill_s:.2f}", "-o", "timeout=2",
+                           "-o", f"timeout_method={opts['timeout_method']}", str(tmp_path)],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    out = done.stdout + done.stderr
+    assert done.returncode == 1, out
+    assert "Timeout" in out and "in test_hangs" in out, out  # every thread's stack, the hung frame named
+    assert "1 failed, 1 passed" in out, out
