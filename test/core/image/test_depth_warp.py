@@ -1,8 +1,10 @@
 """Turning a depth image to another moment by the camera's rotation in between."""
 from __future__ import annotations
 
-import multiprocessing
+import subprocess
+import sys
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import numpy as np
 
@@ -74,12 +76,25 @@ def _mean_warped(_: int) -> float:
     return float(warp_depth(_plane_depth(), CAM, _rotation(1, 4.0), np.array([0.01, 0.0, -0.03])).mean())
 
 
+# Run in a fresh interpreter: a fork from a pytest-xdist worker copies its I/O threads' locks as well, and a child
+# that aborts or hangs is then killed by the timeout instead of hanging Pool.terminate() and the suite with it.
+_FORK = """
+import multiprocessing
+from test.core.image.test_depth_warp import _mean_warped
+
+want = _mean_warped(0)
+with multiprocessing.get_context("fork").Pool(2) as pool:
+    got = pool.map_async(_mean_warped, range(2)).get(timeout=60)
+print(got == [want, want])
+"""
+
+
 def test_a_process_that_warped_can_fork_and_threads_can_share_it():
     """The kernel is a numba parallel loop: GNU OpenMP would abort a forked child of a process that ran it (the
     benchmarks' worker pools), and numba's workqueue layer must not be entered from two threads at once."""
+    done = subprocess.run([sys.executable, "-c", _FORK], capture_output=True, text=True, timeout=180,
+                          cwd=Path(__file__).resolve().parents[3])
+    assert done.returncode == 0 and done.stdout.split() == ["True"], done.stdout + done.stderr[-3000:]
     want = _mean_warped(0)
-    with multiprocessing.get_context("fork").Pool(2) as pool:
-        # a child that aborts never answers: a timeout, not a hung suite
-        assert pool.map_async(_mean_warped, range(2)).get(timeout=60) == [want, want]
     with ThreadPoolExecutor(3) as ex:
         assert list(ex.map(_mean_warped, range(6))) == [want] * 6
