@@ -1,4 +1,4 @@
-"""The event term earns its place where RGB-D cannot hold: a backflip and a bound on honest sensors.
+"""The event term earns its place where RGB-D cannot hold, on honest sensors: a backflip, and a bound frame to frame.
 
 320x240 colour, the D455 model's depth (active stereo under motion, exposed at its own time), the
 DVXplorer model's events; ATE over the frames reported ok, cm, measured November 2026.
@@ -10,10 +10,12 @@ DVXplorer model's events; ATE over the frames reported ok, cm, measured November
   time (``rig.depth_time_offset_s``; the D455 exposes depth -11.1 ms off the colour on this seed) and the
   IMU's fitted velocity moves it (``tracker.depth_time_translation``): 2.35; without either 8.19 (with the gyro's
   prior and the accelerometer's centre, the defaults since 2026-11-27; 2.54 without them).
-* A 2.5 s bound (seed 0, turns of up to ~260 deg/s at every stride): fused 6.9 with the event term joining
-  above 150 deg/s (``fusion.rate_threshold_deg_s``); 11.1 with the former 300; 14.1 with a constant-tau
-  surface; 151.5 with the event term weighed ~0; RGB-D alone 13.5 (213.8 before the feature matches of
-  ``tracker.feature_check_deg`` rescued its lost strides: the events' margin here is now 2x, not 30x).
+* A 2.5 s bound (seed 0, turns of up to ~260 deg/s at every stride), the event term joining above 150 deg/s
+  (``fusion.rate_threshold_deg_s``). Frame to frame (RPE per frame, RMSE; no alignment): fused 1.20 deg and
+  2.32 cm, RGB-D alone 1.83 and 3.74, the event term weighed ~0 2.25 and 4.21, a constant-tau surface 1.75 and
+  2.95 (28 Nov). Over the whole run the two are alike: SE(3) over all poses 3.59 against 3.72 cm, and anchored at
+  the first frame (the odom frame a controller sees) 10.2 against 7.4. Only the paper's alignment, fitted on the
+  first 0.5 s, sets them apart (6.86 against 13.49): the test below therefore compares them frame to frame.
   With the IMU fed, RGB-D alone: 1.19 with the depth moved by the translation over its 14.6 ms offset,
   12.19 turned only.
 
@@ -66,12 +68,15 @@ def test_fused_holds_the_flip_where_rgbd_alone_does_not(flip_runs):
     assert fused["phases"]["flight"]["ate_rmse_cm"] < rgbd["phases"]["flight"]["ate_rmse_cm"] / 3
 
 
-def test_fused_holds_the_bound_where_rgbd_alone_does_not(bound_runs):
+def test_fused_tracks_the_bound_frame_to_frame_better_than_rgbd_alone(bound_runs):
+    """The bound's strides, fused against RGB-D alone: each frame's motion is a third closer to the truth with the
+    events (ratios 1.53 in rotation, 1.61 in translation). A ratio is asked, not an ATE: the ATE that set them apart
+    (6.86 against 13.49 cm) came from the paper's alignment on the first 0.5 s (module docstring)."""
     fused, rgbd = bound_runs[:2]
     assert fused["ate_rmse_cm"] < BOUND_BOUND_CM, fused["ate_rmse_cm"]
     assert fused["modes"].get("fused", 0) >= 30  # the event term joined at the strides' turns
-    assert rgbd["ate_rmse_cm"] > BOUND_BOUND_CM, rgbd["ate_rmse_cm"]
-    assert fused["ate_rmse_cm"] < rgbd["ate_rmse_cm"] / 1.5, (fused["ate_rmse_cm"], rgbd["ate_rmse_cm"])
+    for key in ("rpe_deg_per_frame_rmse", "rpe_cm_per_frame_rmse"):
+        assert fused[key] < rgbd[key] / 1.3, (key, fused[key], rgbd[key])
     assert not any(fused["statuses"].get(s, 0) for s in ("lost", "reinitialised"))
 
 
