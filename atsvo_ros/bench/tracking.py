@@ -32,6 +32,7 @@ from tqdm import tqdm
 from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.imu import ImuBatch
+from atsvo_ros.errors import EvaluationError
 from atsvo_ros.eval.metrics import ASSOCIATION_TEXT, EvalOptions, describe_alignment, errors_by_label, evaluate
 from atsvo_ros.io.trajectory import Trajectory
 from atsvo_ros.runtime.runtime import OdometryRuntime
@@ -216,11 +217,15 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     statuses = [r.status.value for r in results]
     gt = Trajectory(stamps_ns, sim.T_world_base(stamps_ns))
     ok = np.array([s == "ok" for s in statuses])
-    ev = evaluate(gt, Trajectory(stamps_ns, poses), EvalOptions(interpolate_gt=True), ok)
+    est = Trajectory(stamps_ns, poses)
+    ev = evaluate(gt, est, EvalOptions(interpolate_gt=True), ok)
     # evo's default beside the paper's: on a short run the paper's fit on the first 20 % of the poses can turn the
-    # whole trajectory by a few degrees, which the far end pays for in centimetres
-    ate_se3_m = evaluate(gt, Trajectory(stamps_ns, poses), EvalOptions(align="se3", interpolate_gt=True),
-                         ok).metrics["ate_rmse_m"]
+    # whole trajectory by a few degrees, which the far end pays for in centimetres. None where fewer than 3 poses
+    # or positions on one line leave its rotation undefined (the paper's figure above has its own fallback).
+    try:
+        ate_se3_m = evaluate(gt, est, EvalOptions(align="se3", interpolate_gt=True), ok).metrics["ate_rmse_m"]
+    except EvaluationError:
+        ate_se3_m = None
     m = ev.metrics
     times = np.array([r.tracking_time_s for r in results if r.status.value == "ok" and not r.keyframe_inserted]) * 1e3
     fused_t = np.array([r.tracking_time_s for r in results if r.mode == "fused"]) * 1e3
@@ -234,7 +239,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     return {
         "scenario": scenario, "seed": seed, "duration_s": duration_s, "frames": len(results), "imu": use_imu,
         "sensors": dict(sensors or {}),
-        "ate_rmse_cm": m["ate_rmse_m"] * 100.0, "ate_se3_cm": ate_se3_m * 100.0,
+        "ate_rmse_cm": m["ate_rmse_m"] * 100.0, "ate_se3_cm": None if ate_se3_m is None else ate_se3_m * 100.0,
         "rpe_deg_per_frame": m["rpe_rot_deg_per_frame"],
         "rpe_cm_per_frame": m["rpe_trans_cm_per_frame"], "rpe_deg_per_deg": m["rpe_rot_deg_per_deg"],
         # what the line printed per sequence shows: the RMSE (atsvo-replay's statistic), the alignment, the association
