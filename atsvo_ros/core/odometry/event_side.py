@@ -10,6 +10,7 @@ from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.events.event_map import TemporaryEventMap
 from atsvo_ros.core.events.frontend import EventFrame, EventFrontEnd
+from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.core.image.frontend import PreparedFrame
 from atsvo_ros.core.mapping.mapper import EventMapRequest
 from atsvo_ros.core.mapping.ports import MappingPort
@@ -107,6 +108,14 @@ class EventSide:
         if fast:
             self._prev_request = self._event_request()
             self.mapping.prepare_event_map(self._prev_request)
+
+    def shift_world(self, T_wnew_wold: np.ndarray) -> None:
+        """Re-express the previous frame's pose in a moved world (mapping moved the map under it); an event map
+        asked for ahead in the old world is asked for again when needed."""
+        if self._prev_event is not None:
+            ev_frame, frame, T_c_w = self._prev_event
+            self._prev_event = (ev_frame, frame, T_c_w @ se3_inv(T_wnew_wold))
+            self._prev_request = None
 
     def forget(self) -> None:
         """Drop the previous frame's surface (a new map: the next event map must not come from the old one)."""

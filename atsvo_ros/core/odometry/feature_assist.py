@@ -13,7 +13,7 @@ import numpy as np
 
 from atsvo_ros.config import AtsvoConfig
 from atsvo_ros.core.camera import CameraModel
-from atsvo_ros.core.geometry import camera_centre, rotation_angle_rad
+from atsvo_ros.core.geometry import camera_centre, rotation_angle_rad, se3_inv
 from atsvo_ros.core.image.frontend import PreparedFrame
 from atsvo_ros.core.tracking.features import FeatureMatcher, FrameFeatures
 
@@ -92,6 +92,11 @@ class FeatureAssist:
             feats = self._cur[1] if self._cur is not None and self._cur[0] == frame.stamp_ns else None
             self._prev, self._prev_features = (frame, np.asarray(T_c_w, np.float64).copy()), feats
         self._cur = None
+
+    def shift_world(self, T_wnew_wold: np.ndarray) -> None:
+        """Re-express the previous trusted frame's pose in a moved world (mapping moved the map under it)."""
+        if self._prev is not None:
+            self._prev = (self._prev[0], self._prev[1] @ se3_inv(T_wnew_wold))
 
     def forget(self) -> None:
         """A new map: poses before it are not comparable."""

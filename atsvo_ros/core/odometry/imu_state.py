@@ -115,6 +115,11 @@ class VelocityWindow:
         while self._poses[0][0] < stamp_ns - self.window_ns:
             self._poses.popleft()
 
+    def shift_world(self, T_wnew_wold: np.ndarray) -> None:
+        """Re-express the window's poses in a moved world (mapping moved the map under them)."""
+        self._poses = deque((s, T_wnew_wold @ T) for s, T in self._poses)
+        self._cache = None
+
     def fit(self, imu: ImuBatch, g_w: np.ndarray) -> ImuState | None:
         """The IMU's state at the newest pose; None with too few poses or when the IMU does not cover them."""
         if len(self._poses) < self.min_poses:

@@ -80,6 +80,11 @@ class InertialPredictor:
         self._trusted.clear()
         self._last_estimate_ns = None
 
+    def shift_world(self, T_wnew_wold: np.ndarray) -> None:
+        """Re-express the trusted poses and the gravity estimates in a moved world (mapping moved the map)."""
+        self._trusted = deque((s, T_wnew_wold @ T) for s, T in self._trusted)
+        self._estimates = deque((T_wnew_wold[:3, :3] @ g for g in self._estimates), maxlen=GRAVITY_ESTIMATES)
+
     def observe(self, imu: ImuBatch, stamp_ns: int, T_c_w: np.ndarray, trusted: bool) -> None:
         """Record a frame's pose; with three trusted ones spread over two spans, estimate gravity once more."""
         if not trusted:

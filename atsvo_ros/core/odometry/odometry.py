@@ -38,6 +38,7 @@ from atsvo_ros.core.frame import OdometryResult, RgbdFrame, TrackingStatus
 from atsvo_ros.core.geometry import camera_centre, se3_inv
 from atsvo_ros.core.image.frontend import PreparedFrame, RgbdFrontEnd
 from atsvo_ros.core.imu import ImuBatch
+from atsvo_ros.core.mapping.map import MapSnapshot
 from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
 from atsvo_ros.core.mapping.ports import InlineMapping, MappingPort
 from atsvo_ros.core.odometry.depth_timing import DepthTiming
@@ -144,6 +145,8 @@ class Odometry:
         self._affine = (0.0, 0.0)
         # the newest keyframe was taken while the camera turned fast: its colour patches are motion-blurred
         self._blurred_keyframe = False
+        self._asked: dict[int, np.ndarray] = {}  # keyframe stamp -> the T_w_c it was asked at (see _take_snapshot)
+        self._frame_shift: np.ndarray | None = None  # the world's move since the frame was tracked
         self._coast_start_ns: int | None = None  # first frame of the current run of coasting frames
         #: Why the last frame was not ``ok`` (None when it was): for logs and diagnostics.
         self.last_loss_reason: str | None = None
@@ -190,7 +193,7 @@ class Odometry:
         prepared = self.frontend.prepare(frame)
         newer = self.mapping.latest()  # a keyframe mapping finished meanwhile (threaded or remote mapping)
         if newer is not None:
-            self.tracking.set_snapshot(newer)
+            self._take_snapshot(newer)
         note = self.timing.check(stamp, self.MAX_GAP_S)
         if note is not None:
             self.motion.reset()
@@ -207,13 +210,7 @@ class Odometry:
             return self._initialise(prepared, stamp, predicted, t0, note, ev_frame, raw, moved)
         if self._anchor is not None and not self._anchor.turned:
             self._turn_anchor()
-        imu = self.predictor.imu_motion(stamp) if self.config.tracker.imu_translation else None
-        gyro = self.predictor.gyro_pose(stamp, None if imu is None else imu.centre_w)
-        fast = self.predictor.is_fast()
-        guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())
-        last = self.motion.last[1] if self.motion.last else predicted
-        rs = self.predictor.rolling_shutter(stamp)
-        priors = self.predictor.priors(stamp, gyro, imu)
+        predicted, gyro, fast, guesses, last, rs, priors = self._predict(stamp)
         # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
         self.tracking.set_event_map(self.event_side.event_map() if fast else None)
         fused = self.tracking.uses_events(ev_frame)
@@ -225,7 +222,8 @@ class Odometry:
             # mapping finished while this frame was tracked is taken too (it was not ready when the frame began).
             newer = self.mapping.await_pending() if self.mapping.busy() else self.mapping.latest()
             if newer is not None:
-                self.tracking.set_snapshot(newer)
+                if self._take_snapshot(newer) is not None:  # the odometry's poses moved with the map
+                    predicted, gyro, fast, guesses, last, rs, priors = self._predict(stamp)
                 out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
         if out.verdict.level != OK:
             # Not trusted: try harder before accepting a degraded pose or starting a new map.
@@ -268,6 +266,7 @@ class Odometry:
         t_track = time.perf_counter() - t0
         self.last_loss_reason = out.verdict.reason or note
         kf = False
+        self._frame_shift = None
         if status is not TrackingStatus.DEGRADED:
             self._affine = out.affine
             # Keyframes taken mid-flip hold blurred colour patches; the first trusted frame after the turn slows
@@ -284,6 +283,8 @@ class Odometry:
             kf = self._insert(self.tracking.keyframe_request(self.frontend.at_colour_time(prepared), out, rs,
                                                              geometry_only=True))
             self._blurred_keyframe = kf or self._blurred_keyframe
+        if self._frame_shift is not None:  # the keyframe made from this frame was moved by the local window
+            out = dataclasses.replace(out, T_c_w=out.T_c_w @ se3_inv(self._frame_shift))
         self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
         self._observe_inertial(stamp, out.T_c_w, trusted=status is TrackingStatus.OK)
         if moved and self._anchor is not None and status is TrackingStatus.OK:
@@ -450,10 +451,49 @@ class Odometry:
         """Ask mapping for a keyframe (one at a time; a reset waits for its answer); True when it was asked."""
         if not request.reset and self.mapping.busy():
             return False
+        # the pose it was asked at: the local window may move it (see _take_snapshot)
+        self._asked = {} if request.reset else {request.frame.stamp_ns: se3_inv(request.T_c_w)}
         snap = self.mapping.insert(request, wait=request.reset)
         if snap is not None:
-            self.tracking.set_snapshot(snap)
+            self._take_snapshot(snap)
         return True
+
+    def _take_snapshot(self, snap: MapSnapshot) -> np.ndarray | None:
+        """Track against ``snap`` from now on. When mapping's local window moved the newest keyframe from the pose
+        it was asked at, the odometry's poses (the motion, the IMU's windows, the previous frame's) move with it,
+        as DSO's frames follow their tracking reference: the next frames are tracked against the moved map, and a
+        velocity taken across the move would carry it. Returns the move ``T_wnew_wold`` (None: nothing moved).
+        """
+        self.tracking.set_snapshot(snap)
+        kf = snap.last_keyframe
+        T_wold_c = self._asked.pop(kf.stamp_ns, None) if kf is not None else None
+        if T_wold_c is None or np.array_equal(kf.T_w_c, T_wold_c):  # not moved (no window, or it kept the pose)
+            return None
+        T_wnew_wold = kf.T_w_c @ se3_inv(T_wold_c)
+        self.motion.shift_world(T_wnew_wold)
+        for part in (self.velocity, self.inertial):
+            if part is not None:
+                part.shift_world(T_wnew_wold)
+        self.features.shift_world(T_wnew_wold)
+        self.event_side.shift_world(T_wnew_wold)
+        if self._anchor is not None:
+            self._anchor = dataclasses.replace(self._anchor, T_c_w=self._anchor.T_c_w @ se3_inv(T_wnew_wold))
+        self._frame_shift = T_wnew_wold if self._frame_shift is None else T_wnew_wold @ self._frame_shift
+        return T_wnew_wold
+
+    def _predict(self, stamp: int) -> tuple[np.ndarray, np.ndarray | None, bool, list[np.ndarray], np.ndarray,
+                                          RollingShutter | None, Priors]:
+        """The frame's predictions: constant motion, the gyro's pose, whether the motion is fast, the starting
+        guesses, the last pose, the row timing and the priors."""
+        predicted = self.motion.predict(stamp)
+        imu = self.predictor.imu_motion(stamp) if self.config.tracker.imu_translation else None
+        gyro = self.predictor.gyro_pose(stamp, None if imu is None else imu.centre_w)
+        fast = self.predictor.is_fast()
+        guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())
+        last = self.motion.last[1] if self.motion.last else predicted
+        rs = self.predictor.rolling_shutter(stamp)
+        priors = self.predictor.priors(stamp, gyro, imu)
+        return predicted, gyro, fast, guesses, last, rs, priors
 
     def _unmappable(self, prepared: PreparedFrame, T_c_w: np.ndarray) -> str | None:
         """Why a map built from this frame alone would not constrain the pose (None when it would).

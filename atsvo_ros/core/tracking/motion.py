@@ -49,6 +49,11 @@ class MotionModel:
         self._trusted.append(bool(trusted))
         self._twist = None
 
+    def shift_world(self, T_wnew_wold: np.ndarray) -> None:
+        """Re-express the pose history in a moved world (mapping moved the map under it); the motion is unchanged."""
+        T_wold_wnew = se3_inv(T_wnew_wold)
+        self._history = deque(((s, T @ T_wold_wnew) for s, T in self._history), maxlen=2)
+
     def centre_prior(self, stamp_ns: int, max_acceleration_m_s2: float,
                      noise_m: float) -> tuple[np.ndarray, float] | None:
         """The constant-velocity camera centre at ``stamp_ns`` and how far from it the camera can be: the

@@ -59,3 +59,15 @@ def test_no_prior_without_motion_history_or_after_a_reset():
     m.push(2 * DT_NS, _T_c_w(np.array([0.08, 0.0, 0.0])))
     assert m.centre_prior(3 * DT_NS, 60.0, 0.02) is None  # the pose kept across the reset is not trusted
     assert camera_centre(m.predict(3 * DT_NS))[0] == pytest.approx(0.12)  # the trajectory still continues
+
+
+def test_a_moved_world_moves_the_history_and_keeps_the_motion():
+    m = _model()
+    before = m.predict(2 * DT_NS)
+    twist = m.twist_per_s()
+    T_wnew_wold = se3_exp(np.array([0.01, -0.02, 0.005, 0.01, 0.0, -0.02]))
+    m.shift_world(T_wnew_wold)
+    # the same camera, seen from the moved world: T_c_wnew = T_c_wold T_wold_wnew
+    np.testing.assert_allclose(m.predict(2 * DT_NS), before @ se3_inv(T_wnew_wold), atol=1e-12)
+    np.testing.assert_allclose(m.twist_per_s(), twist, atol=1e-9)
+    assert m.velocity_trusted
