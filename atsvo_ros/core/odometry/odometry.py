@@ -145,7 +145,7 @@ class Odometry:
         self._affine = (0.0, 0.0)
         # the newest keyframe was taken while the camera turned fast: its colour patches are motion-blurred
         self._blurred_keyframe = False
-        self._asked: dict[int, np.ndarray] = {}  # keyframe stamp -> the T_w_c it was asked at (see _take_snapshot)
+        self._asked: tuple[int, np.ndarray] | None = None  # the pending keyframe's stamp and the T_w_c it was asked at
         self._frame_shift: np.ndarray | None = None  # the world's move since the frame was tracked
         self._coast_start_ns: int | None = None  # first frame of the current run of coasting frames
         #: Why the last frame was not ``ok`` (None when it was): for logs and diagnostics.
@@ -452,7 +452,7 @@ class Odometry:
         if not request.reset and self.mapping.busy():
             return False
         # the pose it was asked at: the local window may move it (see _take_snapshot)
-        self._asked = {} if request.reset else {request.frame.stamp_ns: se3_inv(request.T_c_w)}
+        self._asked = None if request.reset else (request.frame.stamp_ns, se3_inv(request.T_c_w))
         snap = self.mapping.insert(request, wait=request.reset)
         if snap is not None:
             self._take_snapshot(snap)
@@ -466,8 +466,10 @@ class Odometry:
         """
         self.tracking.set_snapshot(snap)
         kf = snap.last_keyframe
-        T_wold_c = self._asked.pop(kf.stamp_ns, None) if kf is not None else None
-        if T_wold_c is None or np.array_equal(kf.T_w_c, T_wold_c):  # not moved (no window, or it kept the pose)
+        if kf is None or self._asked is None or kf.stamp_ns != self._asked[0]:
+            return None
+        T_wold_c, self._asked = self._asked[1], None
+        if np.array_equal(kf.T_w_c, T_wold_c):  # not moved (no window, or it kept the pose)
             return None
         T_wnew_wold = kf.T_w_c @ se3_inv(T_wold_c)
         self.motion.shift_world(T_wnew_wold)
