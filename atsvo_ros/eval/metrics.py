@@ -21,7 +21,9 @@ Definitions (numpy only; ``evo`` is used in the tests as an independent cross-ch
   to ground truth's, positions untouched. When ground truth hardly moves in that window (less than
   ``min_align_spread_m`` off a straight line: Umeyama's rotation would be unobservable), the first
   pose is put onto ground truth's instead (``evo --align_origin``). ``se3`` / ``sim3`` -- Umeyama over all
-  matched poses without / with scale (``evo -a`` / ``-as``). ``none`` -- as is.
+  matched poses without / with scale (``evo -a`` / ``-as``). ``origin`` -- the first pose onto ground
+  truth's (``evo --align_origin``): an odometry starts where the robot is, so this is the drift a controller
+  sees, free of any fit (a flip's loss in flight stays in every later pose). ``none`` -- as is.
 * ATE: RMSE of the position differences of the aligned matched poses.
 * RPE per frame: for consecutive matched pairs, ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``; rotation
   error = angle of E (deg), translation error = norm of E's translation (cm); reported as means
@@ -62,7 +64,7 @@ from atsvo_ros.core.geometry import interpolate_trajectory, se3_inv
 from atsvo_ros.errors import EvaluationError
 from atsvo_ros.io.trajectory import Trajectory, format_stamp, read_tum
 
-ALIGN_METHODS = ("paper", "se3", "sim3", "none")
+ALIGN_METHODS = ("paper", "se3", "sim3", "origin", "none")
 
 
 @dataclass(frozen=True)
@@ -250,6 +252,8 @@ def align(T_gt: np.ndarray, T_est: np.ndarray, stamps_ns: np.ndarray, opts: Eval
     n = len(T_est)
     if opts.align == "none":
         return T_est.copy(), {"method": "none"}
+    if opts.align == "origin":
+        return _onto_first(T_gt, T_est), {"method": "origin"}
     if opts.align in ("se3", "sim3"):
         if n < 3:
             raise EvaluationError(f"{opts.align} alignment needs at least 3 matched poses, got {n}")
@@ -273,10 +277,15 @@ def align(T_gt: np.ndarray, T_est: np.ndarray, stamps_ns: np.ndarray, opts: Eval
         out[:, :3, :3] = out[:, :3, :3] @ C
     else:
         # No usable motion at the start: the first pose is put onto ground truth's (evo --align_origin).
-        out = (T_gt[0] @ se3_inv(T_est[0]))[None] @ T_est
+        out = _onto_first(T_gt, T_est)
         info["fallback"] = (f"first pose (ground truth moves less than {opts.min_align_spread_m} m "
                             "off a line in the alignment window)")
     return out, info
+
+
+def _onto_first(T_gt: np.ndarray, T_est: np.ndarray) -> np.ndarray:
+    """The estimate moved rigidly so that its first pose is ground truth's (``evo --align_origin``)."""
+    return (T_gt[0] @ se3_inv(T_est[0]))[None] @ T_est
 
 
 # ---------------------------------------------------------------------------- errors
@@ -559,6 +568,8 @@ def describe_alignment(info: dict[str, Any] | None) -> str:
     method = info.get("method")
     if method == "none":
         return "none"
+    if method == "origin":
+        return "first pose onto ground truth's (the odometry's drift)"
     if method in ("se3", "sim3"):
         text = f"{'SE(3)' if method == 'se3' else 'Sim(3)'} Umeyama over all {info.get('n_poses')} matched poses"
         return text + (f", scale {info['scale']:.4f}" if method == "sim3" and info.get("scale") is not None else "")

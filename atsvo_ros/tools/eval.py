@@ -3,7 +3,8 @@
 Alignment ``paper`` (default) is the paper's protocol: SE(3) Umeyama on the first ``--align-s``
 seconds of matched poses (at most 20 % of them), then one body-frame rotation that sets the first
 orientation to ground truth's; ``se3`` / ``sim3``
-align over all matched poses (like ``evo_ape -a`` / ``-as``); ``none`` compares as is.
+align over all matched poses (like ``evo_ape -a`` / ``-as``); ``origin`` puts the first pose onto ground truth's
+(``evo_ape --align_origin``: the odometry's drift as a controller sees it); ``none`` compares as is.
 
 Poses are paired with the nearest ground-truth stamp within ``--t-max-diff``; ground truth is then
 interpolated at the estimate stamps, as atsvo-replay does, so both print the same numbers for the
@@ -18,7 +19,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics, metrics_json
+from atsvo_ros.eval.metrics import ALIGN_METHODS, EvalOptions, evaluate, format_metrics, metrics_json
 from atsvo_ros.eval.plots import plot_run
 from atsvo_ros.io.trajectory import read_tum
 from atsvo_ros.tools._cli import prepare_out_dir, run
@@ -54,8 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="atsvo-eval", description=description(__doc__))
     parser.add_argument("gt", help="ground truth, TUM format (t tx ty tz qx qy qz qw)")
     parser.add_argument("est", help="estimate, TUM format")
-    parser.add_argument("--align", choices=("paper", "se3", "sim3", "none"), default="paper",
-                        help="alignment of the estimate onto ground truth (default: paper)")
+    parser.add_argument("--align", choices=ALIGN_METHODS, default="paper",
+                        help="alignment of the estimate onto ground truth (default: paper; origin: the first pose "
+                             "onto ground truth's, the drift)")
     parser.add_argument("--align-s", type=float, default=2.0,
                         help="paper alignment: seconds of matched poses used for the SE(3) step (default 2)")
     parser.add_argument("--t-max-diff", type=float, default=0.01,

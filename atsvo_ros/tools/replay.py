@@ -32,7 +32,7 @@ from atsvo_ros.config import AtsvoConfig, config_dir, load_config, parse_overrid
 from atsvo_ros.core.frame import TrackingStatus
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.errors import BagError, ConfigError, EvaluationError, TrackingError
-from atsvo_ros.eval.metrics import EvalOptions, evaluate, format_metrics, metrics_json
+from atsvo_ros.eval.metrics import ALIGN_METHODS, EvalOptions, evaluate, format_metrics, metrics_json
 from atsvo_ros.eval.plots import plot_run
 from atsvo_ros.io.record import BagRecorder, check_record_path
 from atsvo_ros.io.sources import detect_preset, open_source
@@ -389,7 +389,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--frame", choices=("base", "camera"), default=None,
                         help="pose written to trajectory.tum: robot base (default) or colour optical frame "
                              "(default for a TUM folder)")
-    parser.add_argument("--align", choices=("paper", "se3", "sim3", "none"), default="paper",
+    parser.add_argument("--align", choices=ALIGN_METHODS, default="paper",
                         help="alignment for metrics.json (default: paper)")
     parser.add_argument("--align-s", type=float, default=2.0,
                         help="paper alignment: seconds of matched poses used for the SE(3) step (default 2)")

@@ -96,3 +96,17 @@ def test_paper_alignment_matches_evo_first_n_plus_orientation(trajectories, alig
     np.testing.assert_allclose(ours.T_w_est[0, :3, :3], ours.T_w_gt[0, :3, :3], atol=1e-12)
     ate = np.sqrt(np.mean(np.sum((P[:, :3, 3] - np.asarray(ref.positions_xyz)) ** 2, axis=1)))
     assert ours.metrics["ate_rmse_m"] == pytest.approx(ate, rel=1e-6)
+
+
+def test_origin_alignment_matches_evo_align_origin(trajectories):
+    """``origin`` is ``evo_ape --align_origin``: the first pose onto ground truth's, nothing fitted."""
+    gt, est = trajectories
+    ours = evaluate(gt, est, EvalOptions(align="origin"))
+    ig, ie = associate(gt.stamps_ns, est.stamps_ns, 10_000_000)
+    ref, e = _evo(gt), _evo(est)
+    ref.reduce_to_ids(ig)
+    e.reduce_to_ids(ie)
+    e.align_origin(ref)
+    np.testing.assert_allclose(ours.T_w_est, np.asarray(e.poses_se3), atol=1e-9)
+    assert ours.metrics["ate_rmse_m"] == pytest.approx(
+        _stat(evo_metrics.APE(evo_metrics.PoseRelation.translation_part), (ref, e), "rmse"), rel=1e-6)
