@@ -176,9 +176,9 @@ def whole_run_figures(gt: Trajectory, est: Trajectory, ok: np.ndarray) -> WholeR
     """evo's SE(3) ATE over all poses, the path's Sim(3) scale and the ATE anchored at the first pose.
 
     Beside the paper's figure, which fits the first 20 % of the poses: on a short run that fit can turn the whole
-    trajectory by a few degrees, which the far end pays for in centimetres, and on a long one it can spread a
-    flip's loss over the run. The scale is what the 10 s bounds' drift mostly is (the D455's depth short,
-    docs/odometry.md); the anchored figure fits nothing.
+    trajectory by a few degrees, which the far end pays for in centimetres. The scale is what the 10 s bounds'
+    drift mostly is (the D455 model's depth biased with range, docs/odometry.md); the anchored figure fits nothing:
+    the drift a controller reading the odometry sees.
     """
     figures = []
     for method in ("se3", "sim3", "origin"):
