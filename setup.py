@@ -50,6 +50,10 @@ setup(
         # the wheel is ~400 MB and its import needs the system library libusb-1.0 (Debian: libusb-1.0-0);
         # the lighter open3d-cpu wheel (~105 MB) provides the same module.
         "peers": ["open3d>=0.18"],
+        # ORB-SLAM3 RGB-D as a peer (atsvo-bench real --orbslam3; GPL-3.0, evaluation only, never imported by
+        # the odometry). Its manylinux wheel carries ORB-SLAM3 and its libraries; the ORB vocabulary it would
+        # download is trained here instead (atsvo_ros.eval.orb_vocabulary).
+        "orbslam3": ["pyorbslam3>=0.1.1"],
         # ROS 2 Jazzy's rclpy + messages as wheels from the package index (Fast DDS; CI and laptops). They
         # exist for CPython 3.11 on x86_64 Linux only; elsewhere (the robot's apt Jazzy on Python 3.12) the
         # extra installs nothing and the system's rclpy is used. No wheel exists for tf2_ros,
@@ -78,6 +82,8 @@ setup(
             "evo>=1.20",
             "dv-processing>=2.0",
             "mcap-ros2-support>=0.5",  # reads --record bags as Foxglove does: by the schemas inside the file
+            # ORB-SLAM3 tracks real frames with a vocabulary trained here (test/eval/test_orbslam3.py)
+            "pyorbslam3>=0.1.1; platform_machine == 'x86_64' and sys_platform == 'linux'",
         ],
     },
     zip_safe=True,

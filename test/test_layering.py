@@ -24,7 +24,7 @@ LAYERS: dict[str, int] = {"errors": 0, "config": 1, "core": 2, "io": 3, "eval": 
 #: Inside core: the floor is every module that is not one of these concerns.
 CORE_LAYERS: dict[str, int] = {"events": 1, "mapping": 2, "tracking": 3, "odometry": 4}
 #: What may be imported inside a function: optional extras (setup.py) and what only some machines have.
-OPTIONAL = {"aedat", "h5py", "evo", "dv_processing", "open3d", "apsw", "zstandard", "ament_index_python"}
+OPTIONAL = {"pyorbslam3", "aedat", "h5py", "evo", "dv_processing", "open3d", "apsw", "zstandard", "ament_index_python"}
 #: ROS Python modules: imported inside functions of ``nodes/`` so the package imports without ROS.
 ROS = {"rclpy", "builtin_interfaces", "std_msgs", "std_srvs", "sensor_msgs", "nav_msgs", "geometry_msgs",
        "diagnostic_msgs", "tf2_msgs", "tf2_ros", "event_camera_msgs", "dvs_msgs", "rosidl_runtime_py"}

@@ -5,7 +5,8 @@ replays our pipeline (:func:`atsvo_ros.tools.replay.replay`, mode rgbd, the fold
 then each ``--variant NAME:key=value,...`` (the same with those config overrides, e.g. the paper's
 formulation against the default), then OpenCV's frame-to-frame dense odometry (rgbd, rgb, depth) and
 Open3D's with its three losses (:mod:`atsvo_ros.eval.peers`) on the same undistorted frames, Open3D
-when it is installed.
+when it is installed, and ORB-SLAM3 RGB-D (:mod:`atsvo_ros.eval.orbslam3`, the raw frames, a vocabulary trained
+on the simulator's rooms: :mod:`atsvo_ros.bench.peer_vocabulary`) when its bindings are installed.
 
 Columns (every method scored alike, :func:`atsvo_ros.eval.metrics.evaluate`):
 
@@ -39,21 +40,25 @@ import re
 import tempfile
 import time
 from collections.abc import Sequence
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
+from atsvo_ros.bench.peer_vocabulary import vocabulary_file
 from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.odometry.odometry import Odometry
 from atsvo_ros.errors import ConfigError
 from atsvo_ros.eval.metrics import EvalOptions, evaluate, rotation_angle_deg
+from atsvo_ros.eval.orbslam3 import run_orbslam3
 from atsvo_ros.eval.peers import OPENCV_METHODS, run_open3d, run_opencv
 from atsvo_ros.io.images import depth_to_metres
 from atsvo_ros.io.trajectory import Trajectory, write_tum
 from atsvo_ros.io.tum_rgbd import TumRgbdReader, TumSource
+from atsvo_ros.tools.demo import cache_dir
 from atsvo_ros.tools.replay import replay
 
 DEFAULT_FOLDER = Path(__file__).resolve().parents[2].parent / "shared" / "realdata" / "tum_rgbd_fr1_rpy_300"
@@ -156,8 +161,9 @@ def run_ours(folder: Path, out_dir: Path, config: Any, progress: bool) -> dict[s
 
 def bench_folder(folder: Path, preset: str | None, base_overrides: dict[str, Any],
                  variants: list[tuple[str, dict[str, Any]]], open3d_methods: Sequence[str], out: Path,
-                 progress: bool, opencv_methods: Sequence[str] = tuple(OPENCV_METHODS)) -> dict[str, Any]:
-    """All rows of one sequence."""
+                 progress: bool, opencv_methods: Sequence[str] = tuple(OPENCV_METHODS),
+                 orbslam3_vocabulary: Path | None = None) -> dict[str, Any]:
+    """All rows of one sequence (ORB-SLAM3's when a vocabulary is given)."""
 
     reader = TumRgbdReader(folder)
     preset = preset or TumSource(folder).preset
@@ -188,6 +194,11 @@ def bench_folder(folder: Path, preset: str | None, base_overrides: dict[str, Any
                                depth_max_m=rig.depth_max_m, progress=progress))
     if open3d_methods:
         runs.update(run_open3d(frames(), camera, open3d_methods, depth_max_m=rig.depth_max_m, progress=progress))
+    if orbslam3_vocabulary is not None:  # the frames as the files hold them: its own undistortion and depth range
+        raw = ((f.stamp_ns, f.rgb, f.depth_raw.astype(np.float32) * np.float32(rig.depth_scale_m))
+               for f in reader.frames())
+        run = run_orbslam3(raw, camera, orbslam3_vocabulary, progress=progress, total=len(reader))
+        runs[run.name] = run
     for run in runs.values():
         write_tum(out / f"{run.name}.tum", run.trajectory(), header=f"{run.name} on {folder.name} (T_world_cam)")
         row = {"method": run.name, **score(gt, run.stamps_ns, run.T_world_cam, run.ok),
@@ -232,7 +243,8 @@ def markdown(results: dict[str, Any]) -> str:
     env = results["environment"]
     lines += ["", f"Environment: {env['cpus']} CPUs (load average {env['load_avg_1min_before']:.1f} before the run: "
                   f"other processes inflate the times), numpy {env['numpy']}, "
-                  f"opencv {env.get('opencv')}, open3d {env['open3d'] or 'not installed'}."]
+                  f"opencv {env.get('opencv')}, open3d {env['open3d'] or 'not installed'}, "
+                  f"pyorbslam3 {env.get('pyorbslam3') or 'not installed'}."]
     return "\n".join(lines) + "\n"
 
 
@@ -259,6 +271,9 @@ def add_real_args(p: argparse.ArgumentParser) -> None:
                    metavar="METHOD", help="OpenCV odometry types to run: rgbd, rgb, depth (none: skip OpenCV)")
     p.add_argument("--open3d", nargs="*", default=["point_to_plane", "hybrid", "intensity"],
                    metavar="METHOD", help="Open3D losses to run (none: skip Open3D)")
+    p.add_argument("--orbslam3", action=argparse.BooleanOptionalAction, default=True,
+                   help="run ORB-SLAM3 RGB-D when its bindings are installed (pip install 'atsvo_ros[orbslam3]'; "
+                        "its vocabulary is trained on simulated rooms and cached on first use)")
     p.add_argument("--out", default=None, help="write results.json, results.md and the trajectories here")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -286,6 +301,15 @@ def main_real(args: argparse.Namespace) -> int:
             notes.append(f"Open3D rows skipped: open3d is not importable ({exc}); pip install 'atsvo_ros[peers]'")
             print(f"note: {notes[-1]}")
             methods = []
+    vocabulary, orb_version = None, None
+    if args.orbslam3:
+        try:
+            orb_version = version("pyorbslam3")
+            vocabulary = vocabulary_file(cache_dir(), progress=not args.quiet)
+        except ImportError as exc:  # PackageNotFoundError is one
+            notes.append(f"ORB-SLAM3 row skipped: pyorbslam3 is not installed ({exc}); "
+                         "pip install 'atsvo_ros[orbslam3]'")
+            print(f"note: {notes[-1]}")
     tmp = None
     if args.out:
         out = Path(args.out)
@@ -294,14 +318,14 @@ def main_real(args: argparse.Namespace) -> int:
         out = Path(tmp.name)
     results: dict[str, Any] = {"sequences": [], "bad_rot_deg": BAD_ROT_DEG, "bad_rot_share": BAD_ROT_SHARE,
                                "environment": {"cpus": os.cpu_count(), "numpy": np.__version__, "open3d": o3d_version,
-                                               "opencv": cv2.__version__,
+                                               "opencv": cv2.__version__, "pyorbslam3": orb_version,
                                                "load_avg_1min_before": os.getloadavg()[0]}}
     try:
         for folder in folders:
             print(f"{folder.name}")
             print("  " + "  ".join(f"{h:>{max(len(h), 12) if i else 28}}" for i, (_, h, _) in enumerate(COLUMNS)))
             seq = bench_folder(folder, args.preset, base, variants, methods, out / folder.name, progress=not args.quiet,
-                               opencv_methods=args.opencv)
+                               opencv_methods=args.opencv, orbslam3_vocabulary=vocabulary)
             seq["notes"] = notes
             results["sequences"].append(seq)
     finally:

@@ -71,7 +71,7 @@ def test_bench_real_runs_ours_and_variants_and_writes_the_table(tmp_path):
     args = build_parser().parse_args(["real", str(folder), "--open3d", "--quiet", "--out", str(tmp_path / "o"),
                                       "--variant", "few:tracker.max_iterations=5", "--opencv", "rgbd"])
     assert args.open3d == [] and args.opencv == ["rgbd"]
-    assert main(["real", str(folder), "--open3d", "--quiet", "--out", str(tmp_path / "o"),
+    assert main(["real", str(folder), "--open3d", "--quiet", "--out", str(tmp_path / "o"), "--no-orbslam3",
                  "--variant", "few:tracker.max_iterations=5", "--opencv", "rgbd",
                  "--variant", "window:mapping.window_iterations=2,mapping.min_tracked_fraction=0.99"]) == 0
     res = json.loads((tmp_path / "o" / "results.json").read_text())
