@@ -8,6 +8,7 @@ frames without keyframe insertion), ATE RMSE and RPE per frame against the simul
 (paper protocol of :mod:`atsvo_ros.eval.metrics`), the status counts and whether the status left
 ``ok`` before the error grew past ``--loss-limit-cm`` (the "never silently wrong" check). Simulated
 frames are cached in ``$ATSVO_CACHE`` (compressed npz), so reruns with other parameters are quick.
+``--orbslam3`` runs ORB-SLAM3 RGB-D (no IMU) on the same frames as a peer (:func:`orbslam3_sequence`).
 Also runnable as ``python -m atsvo_ros.bench.tracking``.
 """
 from __future__ import annotations
@@ -29,11 +30,13 @@ from typing import Any, NamedTuple
 import numpy as np
 from tqdm import tqdm
 
+from atsvo_ros.bench.peer_vocabulary import vocabulary_file
 from atsvo_ros.config import load_config, parse_overrides
 from atsvo_ros.core.events.batch import EventBatch
 from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.errors import EvaluationError
 from atsvo_ros.eval.metrics import ASSOCIATION_TEXT, EvalOptions, describe_alignment, errors_by_label, evaluate
+from atsvo_ros.eval.orbslam3 import run_orbslam3
 from atsvo_ros.io.trajectory import Trajectory
 from atsvo_ros.runtime.runtime import OdometryRuntime
 from atsvo_ros.sim.motion import PHASES
@@ -192,6 +195,42 @@ def whole_run_figures(gt: Trajectory, est: Trajectory, ok: np.ndarray) -> WholeR
                     None if origin is None else origin.metrics["ate_rmse_m"])
 
 
+def sequence_spec(scenario: str, seed: int, duration_s: float, config: str | None = None, width: int | None = None,
+                  height: int | None = None, depth: str | None = None,
+                  sensors: dict[str, float] | None = None) -> SequenceSpec:
+    """The simulated sequence :func:`run_sequence` tracks (and a peer is run on)."""
+    spec = SequenceSpec(scenario=scenario, duration_s=duration_s, seed=seed, config=config, width=width,
+                        height=height, depth=depth)
+    return with_sensors(spec, **(sensors or {}))
+
+
+def orbslam3_sequence(spec: SequenceSpec, vocabulary: Path, progress: bool = True) -> dict[str, Any]:
+    """ORB-SLAM3 RGB-D on the frames :func:`run_sequence` tracks (no IMU): its ATEs and the frames it lost.
+
+    Scored against the colour camera's true pose (its poses are the camera's), with the paper's alignment, SE(3)
+    over all poses and the first pose anchored, as ours; frames not ``OK`` keep its last pose.
+    """
+    frames, _, sim = simulated_frames(spec, progress)
+    run = run_orbslam3(iter(frames), sim.rig.rgb_camera, vocabulary, progress=progress, total=len(frames))
+    gt = Trajectory(run.stamps_ns, sim.T_world_rgb(run.stamps_ns))
+    paper = evaluate(gt, run.trajectory(), EvalOptions(interpolate_gt=True), run.ok)
+    whole = whole_run_figures(gt, run.trajectory(), run.ok)
+    lost = np.flatnonzero(~run.ok)
+    return {"ate_rmse_cm": paper.metrics["ate_rmse_m"] * 100.0,
+            "ate_se3_cm": None if whole.ate_se3_m is None else whole.ate_se3_m * 100.0,
+            "ate_origin_cm": None if whole.ate_origin_m is None else whole.ate_origin_m * 100.0,
+            "ok": int(run.ok.sum()), "frames": len(run.ok), "first_not_ok": int(lost[0]) if len(lost) else None,
+            "track_ms_median": float(np.median(run.time_s) * 1e3), "map_changes": run.info["map_changes"]}
+
+
+def orbslam3_line(o: dict[str, Any]) -> str:
+    """The peer's line under a sequence's."""
+    return (f"  ORB-SLAM3 RGB-D, same frames, no IMU: ATE RMSE {o['ate_rmse_cm']:.2f} cm (SE(3) over all poses "
+            f"{_fmt(o['ate_se3_cm'], '.2f')}; first pose onto the truth's {_fmt(o['ate_origin_cm'], '.2f')})  "
+            f"ok {o['ok']}/{o['frames']} (first not ok: {_fmt(o['first_not_ok'], 'd')})  "
+            f"track median {o['track_ms_median']:.1f} ms")
+
+
 def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None = None,
                  overrides: dict[str, Any] | None = None, width: int | None = None, height: int | None = None,
                  progress: bool = True, use_imu: bool = False, loss_limit_cm: float = 10.0,
@@ -209,9 +248,7 @@ def run_sequence(scenario: str, seed: int, duration_s: float, config: str | None
     higher contrast threshold, more noise, a dimmer room).
     """
 
-    spec = SequenceSpec(scenario=scenario, duration_s=duration_s, seed=seed, config=config, width=width,
-                        height=height, depth=depth)
-    spec = with_sensors(spec, **(sensors or {}))
+    spec = sequence_spec(scenario, seed, duration_s, config, width, height, depth, sensors)
     # the events are simulated in a thread beside the frames: each stream keeps ~1.3-1.5 of the 2 cores busy
     with ThreadPoolExecutor(1, thread_name_prefix="atsvo-sim-events") as pool:
         events_job = pool.submit(simulated_events, spec, progress) if use_events else None
@@ -330,6 +367,8 @@ def add_tracking_args(p: argparse.ArgumentParser) -> None:
                    help="the room's IR light against the D455's projector (default 0.25; lower: dimmer, more smear)")
     p.add_argument("--loss-limit-cm", type=float, default=10.0,
                    help="position error by which the status must have left ok (default 10)")
+    p.add_argument("--orbslam3", action="store_true",
+                   help="also run ORB-SLAM3 RGB-D on each sequence's frames (pip install 'atsvo_ros[orbslam3]')")
     p.add_argument("--json", default=None, help="write the per-sequence figures to this file")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     add_config_args(p, default="synthetic")
@@ -349,6 +388,7 @@ def _fmt(v: Any, f: str) -> str:
 def main_tracking(args: argparse.Namespace) -> int:
     """Run the benchmark for parsed arguments; prints one line per sequence and a summary."""
     overrides = parse_overrides(args.set)
+    vocabulary = vocabulary_file(cache_dir(), progress=not args.quiet) if args.orbslam3 else None
     rows = []
     for scenario in args.scenarios:
         for seed in args.seeds:
@@ -358,6 +398,11 @@ def main_tracking(args: argparse.Namespace) -> int:
                              stamp_latency_s=args.stamp_latency, sensors=sensor_settings(args))
             rows.append(r)
             print(sequence_line(r), flush=True)
+            if vocabulary is not None:
+                spec = sequence_spec(scenario, seed, args.duration, args.config, args.width, args.height,
+                                     sensors=sensor_settings(args))
+                r["orbslam3"] = orbslam3_sequence(spec, vocabulary, progress=not args.quiet)
+                print(orbslam3_line(r["orbslam3"]), flush=True)
     med = [r["track_ms_median"] for r in rows if r["track_ms_median"] is not None]
     print(summary_line(rows, med))
     if args.json:

@@ -13,9 +13,13 @@ ORB-SLAM3 runs threads of its own and is not deterministic: a few percent betwee
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import os
+import sys
 import tempfile
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +76,23 @@ def settings_text(camera: CameraModel, fps: float = 30.0) -> str:
                             p2=d[3], k3=d[4], width=camera.width, height=camera.height, fps=fps)
 
 
+@contextlib.contextmanager
+def _stdout_to(path: Path) -> Iterator[None]:
+    """File descriptor 1 (where ORB-SLAM3's C++ writes) into ``path`` for the block; Python's stdout flushed first."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(path, "wb") as log:
+            os.dup2(log.fileno(), 1)
+            try:
+                yield
+            finally:
+                ctypes.CDLL(None).fflush(None)  # C stdio's buffer (std::cout writes through it) before fd 1 returns
+                os.dup2(saved, 1)
+    finally:
+        os.close(saved)
+
+
 def run_orbslam3(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: CameraModel, vocabulary: Path,
                  progress: bool = True, total: int | None = None) -> PeerRun:
     """Track ``(stamp_ns, rgb, depth_m)`` frames (RGB uint8, float32 metres) with ORB-SLAM3 RGB-D.
@@ -88,22 +109,23 @@ def run_orbslam3(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: C
     with tempfile.TemporaryDirectory(prefix="atsvo-orbslam3-") as tmp:
         settings = Path(tmp) / "rgbd.yaml"
         settings.write_text(settings_text(camera))
-        slam = pyorbslam3.Slam(str(vocabulary), str(settings), pyorbslam3.Sensor.RGBD)
-        try:
-            for stamp_ns, rgb, depth_m in tqdm(frames, total=total, desc="ORB-SLAM3", unit="frame",
-                                               disable=not progress, leave=False):
-                t0 = time.perf_counter()
-                r = slam.track_rgbd(np.ascontiguousarray(rgb), np.asarray(depth_m, np.float32), stamp_ns * 1e-9)
-                times.append(time.perf_counter() - t0)
-                good = bool(r.pose_valid) and r.state == pyorbslam3.TrackingState.OK
-                if r.pose_valid:
-                    T_last = np.array(r.pose_wc, float)
-                changed += int(slam.map_changed())
-                stamps.append(int(stamp_ns))
-                poses.append(T_last.copy())
-                ok.append(good)
-        finally:
-            slam.shutdown()
+        with _stdout_to(Path(tmp) / "orbslam3.log"):  # its banner, settings and map events, not our table
+            slam = pyorbslam3.Slam(str(vocabulary), str(settings), pyorbslam3.Sensor.RGBD)
+            try:
+                for stamp_ns, rgb, depth_m in tqdm(frames, total=total, desc="ORB-SLAM3", unit="frame",
+                                                   disable=not progress, leave=False):
+                    t0 = time.perf_counter()
+                    r = slam.track_rgbd(np.ascontiguousarray(rgb), np.asarray(depth_m, np.float32), stamp_ns * 1e-9)
+                    times.append(time.perf_counter() - t0)
+                    good = bool(r.pose_valid) and r.state == pyorbslam3.TrackingState.OK
+                    if r.pose_valid:
+                        T_last = np.array(r.pose_wc, float)
+                    changed += int(slam.map_changed())
+                    stamps.append(int(stamp_ns))
+                    poses.append(T_last.copy())
+                    ok.append(good)
+            finally:
+                slam.shutdown()
     n = len(stamps)
     if n == 0:
         raise EvaluationError("ORB-SLAM3 got no frames")
