@@ -31,6 +31,8 @@ class MotionModel:
         self._history: deque[tuple[int, np.ndarray]] = deque(maxlen=2)
         self._trusted: deque[bool] = deque(maxlen=2)
         self._twist: tuple[np.ndarray, int] | None = None  # the last motion's twist (computed once per push)
+        #: the last prediction (stamp, scale, T_c_w): a frame asks for the same one five times (0.05 ms each)
+        self._predicted: tuple[int, float, np.ndarray] | None = None
 
     def reset(self) -> None:
         """Forget the motion (after a clock jump or a re-initialisation the velocity is unknown)."""
@@ -38,6 +40,7 @@ class MotionModel:
         self._history.clear()
         self._trusted.clear()
         self._twist = None
+        self._predicted = None
         if last is not None:
             self._history.append(last)
             self._trusted.append(False)
@@ -48,11 +51,13 @@ class MotionModel:
         self._history.append((int(stamp_ns), np.asarray(T_c_w, dtype=np.float64).copy()))
         self._trusted.append(bool(trusted))
         self._twist = None
+        self._predicted = None
 
     def shift_world(self, T_wnew_wold: np.ndarray) -> None:
         """Re-express the pose history in a moved world (mapping moved the map under it); the motion is unchanged."""
         T_wold_wnew = se3_inv(T_wnew_wold)
         self._history = deque(((s, T @ T_wold_wnew) for s, T in self._history), maxlen=2)
+        self._predicted = None
 
     def centre_prior(self, stamp_ns: int, max_acceleration_m_s2: float,
                      noise_m: float) -> tuple[np.ndarray, float] | None:
@@ -126,9 +131,14 @@ class MotionModel:
         vel = self._velocity()
         if vel is None:
             return T1.copy()
+        cached = self._predicted
+        if cached is not None and cached[0] == stamp_ns and cached[1] == scale:
+            return cached[2].copy()
         xi, dt = vel
         ratio = float(np.clip((stamp_ns - s1) / dt, 0.0, self.MAX_RATIO))
-        return se3_exp(scale * ratio * xi) @ T1
+        T = se3_exp(scale * ratio * xi) @ T1
+        self._predicted = (stamp_ns, scale, T)
+        return T.copy()
 
     def predict_with_rotation(self, stamp_ns: int, R_c1_c0: np.ndarray) -> np.ndarray:
         """Prediction with the rotation from the last frame ``c0`` to the new one ``c1`` given (e.g. by the gyro).

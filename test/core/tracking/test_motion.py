@@ -71,3 +71,16 @@ def test_a_moved_world_moves_the_history_and_keeps_the_motion():
     np.testing.assert_allclose(m.predict(2 * DT_NS), before @ se3_inv(T_wnew_wold), atol=1e-12)
     np.testing.assert_allclose(m.twist_per_s(), twist, atol=1e-9)
     assert m.velocity_trusted
+
+
+def test_a_repeated_prediction_is_the_same_and_the_callers_own_it():
+    m = _model()
+    first = m.predict(2 * DT_NS)
+    first[:3, 3] += 1.0  # a caller editing its copy
+    again = m.predict(2 * DT_NS)
+    np.testing.assert_allclose(camera_centre(again), [0.08, 0.0, 0.0], atol=1e-12)
+    assert not np.allclose(m.predict_scaled(2 * DT_NS, 0.5), again)  # another scale: another prediction
+    m.predict(2 * DT_NS)
+    m.push(2 * DT_NS, _T_c_w(np.array([0.10, 0.0, 0.0])))  # a new pose: the motion changed
+    np.testing.assert_allclose(camera_centre(m.predict(2 * DT_NS)), [0.10, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(camera_centre(m.predict(3 * DT_NS)), [0.16, 0.0, 0.0], atol=1e-12)
