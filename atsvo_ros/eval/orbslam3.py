@@ -9,21 +9,22 @@ ORB-SLAM3 says ``OK`` with a valid pose; a frame without a valid pose keeps the 
 Loop closure stays on: this build of the bindings crashes (segmentation fault, after the first map) when
 the settings switch it off (``loopClosing: 0``). :attr:`PeerRun.info` counts the frames after which the
 map changed as a loop closure or merge does (``map_changed``), so a run that closed a loop is visible.
-ORB-SLAM3 runs threads of its own and is not deterministic: a few percent between runs.
+ORB-SLAM3 runs threads of its own and is not deterministic: a few percent between runs. Each run is a child
+process (:mod:`atsvo_ros.eval._orbslam3_child`): ORB-SLAM3 keeps the first camera's image bounds and grid in static
+members for the life of a process (``Frame::mbInitialComputations``), so a second camera in the same process was
+tracked with the first one's (TUM frames after a simulated 320x240 run: lost after 32 of 90 frames). The child's
+standard output (its banner, settings and map events) goes to a log, not our table.
 """
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import os
+import importlib.util
+import subprocess
 import sys
 import tempfile
-import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.errors import EvaluationError
@@ -76,59 +77,44 @@ def settings_text(camera: CameraModel, fps: float = 30.0) -> str:
                             p2=d[3], k3=d[4], width=camera.width, height=camera.height, fps=fps)
 
 
-@contextlib.contextmanager
-def _stdout_to(path: Path) -> Iterator[None]:
-    """File descriptor 1 (where ORB-SLAM3's C++ writes) into ``path`` for the block; Python's stdout flushed first."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        with open(path, "wb") as log:
-            os.dup2(log.fileno(), 1)
-            try:
-                yield
-            finally:
-                ctypes.CDLL(None).fflush(None)  # C stdio's buffer (std::cout writes through it) before fd 1 returns
-                os.dup2(saved, 1)
-    finally:
-        os.close(saved)
-
-
 def run_orbslam3(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: CameraModel, vocabulary: Path,
-                 progress: bool = True, total: int | None = None) -> PeerRun:
-    """Track ``(stamp_ns, rgb, depth_m)`` frames (RGB uint8, float32 metres) with ORB-SLAM3 RGB-D.
+                 progress: bool = True, total: int | None = None, real_time: bool = True) -> PeerRun:
+    """Track ``(stamp_ns, rgb, depth_m)`` frames (RGB uint8, float32 metres) with ORB-SLAM3 RGB-D, in a child process.
+
+    ``real_time``: hand a frame over no earlier than its stamp says (from the first frame's), as ORB-SLAM3's own
+    examples do. Its local mapping runs in a thread beside tracking; fed as fast as tracking returns, on a busy
+    2-core machine it fell behind and tracking lost a simulated trot after 6 frames.
 
     Raises:
-        EvaluationError: the bindings are not installed (``pip install 'atsvo_ros[orbslam3]'``).
+        EvaluationError: the bindings are not installed (``pip install 'atsvo_ros[orbslam3]'``), no frames, or the
+            child failed (the end of its log in the message).
     """
-    try:
-        import pyorbslam3
-    except ImportError as exc:
-        raise EvaluationError(f"ORB-SLAM3 needs its pip bindings ({exc}): pip install 'atsvo_ros[orbslam3]'") from exc
-    stamps, poses, ok, times, changed = [], [], [], [], 0
-    T_last = np.eye(4)
-    with tempfile.TemporaryDirectory(prefix="atsvo-orbslam3-") as tmp:
-        settings = Path(tmp) / "rgbd.yaml"
-        settings.write_text(settings_text(camera))
-        with _stdout_to(Path(tmp) / "orbslam3.log"):  # its banner, settings and map events, not our table
-            slam = pyorbslam3.Slam(str(vocabulary), str(settings), pyorbslam3.Sensor.RGBD)
-            try:
-                for stamp_ns, rgb, depth_m in tqdm(frames, total=total, desc="ORB-SLAM3", unit="frame",
-                                                   disable=not progress, leave=False):
-                    t0 = time.perf_counter()
-                    r = slam.track_rgbd(np.ascontiguousarray(rgb), np.asarray(depth_m, np.float32), stamp_ns * 1e-9)
-                    times.append(time.perf_counter() - t0)
-                    good = bool(r.pose_valid) and r.state == pyorbslam3.TrackingState.OK
-                    if r.pose_valid:
-                        T_last = np.array(r.pose_wc, float)
-                    changed += int(slam.map_changed())
-                    stamps.append(int(stamp_ns))
-                    poses.append(T_last.copy())
-                    ok.append(good)
-            finally:
-                slam.shutdown()
-    n = len(stamps)
-    if n == 0:
+    if importlib.util.find_spec("pyorbslam3") is None:
+        raise EvaluationError("ORB-SLAM3 needs its pip bindings: pip install 'atsvo_ros[orbslam3]'")
+    stamps, rgbs, depths = [], [], []
+    for stamp_ns, rgb, depth_m in frames:
+        stamps.append(int(stamp_ns))
+        rgbs.append(np.ascontiguousarray(rgb))
+        depths.append(np.asarray(depth_m, np.float32))
+    if not stamps:
         raise EvaluationError("ORB-SLAM3 got no frames")
-    return PeerRun("orbslam3_rgbd", np.array(stamps, np.int64), np.stack(poses), np.array(ok), np.array(times),
-                   np.zeros(n), np.full(n, np.nan), np.full(n, np.nan),
-                   info={"map_changes": changed, "loop_closing": True})
+    with tempfile.TemporaryDirectory(prefix="atsvo-orbslam3-") as tmp:
+        folder = Path(tmp)
+        (folder / "rgbd.yaml").write_text(settings_text(camera))
+        np.save(folder / "stamps.npy", np.array(stamps, np.int64))
+        np.save(folder / "rgb.npy", np.stack(rgbs))
+        np.save(folder / "depth.npy", np.stack(depths))
+        del rgbs, depths
+        log = folder / "orbslam3.log"
+        with open(log, "wb") as out:
+            cmd = [sys.executable, "-m", "atsvo_ros.eval._orbslam3_child", str(folder), str(vocabulary),
+                   "1" if real_time else "0", "1" if progress else "0"]
+            done = subprocess.run(cmd, stdout=out, check=False)
+        if done.returncode != 0:
+            tail = "\n".join(log.read_text(errors="replace").splitlines()[-15:])
+            raise EvaluationError(f"ORB-SLAM3 failed (exit code {done.returncode}); the end of its log:\n{tail}")
+        with np.load(folder / "result.npz") as r:
+            poses, ok, times, changed = r["T_w_c"], r["ok"], r["time_s"], int(r["map_changes"])
+    n = len(stamps)
+    return PeerRun("orbslam3_rgbd", np.array(stamps, np.int64), poses, ok, times, np.zeros(n), np.full(n, np.nan),
+                   np.full(n, np.nan), info={"map_changes": changed, "loop_closing": True, "real_time": real_time})

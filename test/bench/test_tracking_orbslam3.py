@@ -16,6 +16,6 @@ def test_orbslam3_tracks_a_simulated_trot(tmp_path):
     o = orbslam3_sequence(spec, vocabulary, progress=False)
     print(orbslam3_line(o))
     assert o["frames"] == len(frames) and o["ok"] >= len(frames) - 1
-    # measured 0.71 cm (SE(3)) and 1.42 (anchored) over this 0.73 m path: a run that lost the motion is tens of cm off
+    # measured 0.71-1.51 cm (SE(3)) and 1.42-2.27 (anchored) over this 0.73 m path; a run that lost it is tens of cm off
     assert o["ate_se3_cm"] < 3.0 and o["ate_origin_cm"] < 5.0
     assert "ORB-SLAM3 RGB-D, same frames, no IMU: ATE RMSE" in orbslam3_line(o)
