@@ -40,7 +40,7 @@ import re
 import tempfile
 import time
 from collections.abc import Sequence
-from importlib.metadata import version
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
@@ -197,7 +197,7 @@ def bench_folder(folder: Path, preset: str | None, base_overrides: dict[str, Any
     if orbslam3_vocabulary is not None:  # the frames as the files hold them: its own undistortion and depth range
         raw = ((f.stamp_ns, f.rgb, f.depth_raw.astype(np.float32) * np.float32(rig.depth_scale_m))
                for f in reader.frames())
-        run = run_orbslam3(raw, camera, orbslam3_vocabulary, progress=progress, total=len(reader))
+        run = run_orbslam3(raw, camera, orbslam3_vocabulary, progress=progress)
         runs[run.name] = run
     for run in runs.values():
         write_tum(out / f"{run.name}.tum", run.trajectory(), header=f"{run.name} on {folder.name} (T_world_cam)")
@@ -305,11 +305,11 @@ def main_real(args: argparse.Namespace) -> int:
     if args.orbslam3:
         try:
             orb_version = version("pyorbslam3")
-            vocabulary = vocabulary_file(cache_dir(), progress=not args.quiet)
-        except ImportError as exc:  # PackageNotFoundError is one
-            notes.append(f"ORB-SLAM3 row skipped: pyorbslam3 is not installed ({exc}); "
-                         "pip install 'atsvo_ros[orbslam3]'")
+        except PackageNotFoundError:
+            notes.append("ORB-SLAM3 row skipped: pyorbslam3 is not installed; pip install 'atsvo_ros[orbslam3]'")
             print(f"note: {notes[-1]}")
+        else:
+            vocabulary = vocabulary_file(cache_dir(), progress=not args.quiet)
     tmp = None
     if args.out:
         out = Path(args.out)

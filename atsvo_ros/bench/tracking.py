@@ -211,7 +211,7 @@ def orbslam3_sequence(spec: SequenceSpec, vocabulary: Path, progress: bool = Tru
     over all poses and the first pose anchored, as ours; frames not ``OK`` keep its last pose.
     """
     frames, _, sim = simulated_frames(spec, progress)
-    run = run_orbslam3(iter(frames), sim.rig.rgb_camera, vocabulary, progress=progress, total=len(frames))
+    run = run_orbslam3(frames, sim.rig.rgb_camera, vocabulary, progress=progress)
     gt = Trajectory(run.stamps_ns, sim.T_world_rgb(run.stamps_ns))
     paper = evaluate(gt, run.trajectory(), EvalOptions(interpolate_gt=True), run.ok)
     whole = whole_run_figures(gt, run.trajectory(), run.ok)

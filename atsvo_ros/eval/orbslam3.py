@@ -9,7 +9,8 @@ ORB-SLAM3 says ``OK`` with a valid pose; a frame without a valid pose keeps the 
 Loop closure stays on: this build of the bindings crashes (segmentation fault, after the first map) when
 the settings switch it off (``loopClosing: 0``). :attr:`PeerRun.info` counts the frames after which the
 map changed as a loop closure or merge does (``map_changed``), so a run that closed a loop is visible.
-ORB-SLAM3 runs threads of its own and is not deterministic: a few percent between runs. Each run is a child
+ORB-SLAM3 runs threads of its own and is not deterministic (at a flip's or a subsample's speed, runs differ several
+times over: docs/odometry.md). Each run is a child
 process (:mod:`atsvo_ros.eval._orbslam3_child`): ORB-SLAM3 keeps the first camera's image bounds and grid in static
 members for the life of a process (``Frame::mbInitialComputations``), so a second camera in the same process was
 tracked with the first one's (TUM frames after a simulated 320x240 run: lost after 32 of 90 frames). The child's
@@ -78,7 +79,7 @@ def settings_text(camera: CameraModel, fps: float = 30.0) -> str:
 
 
 def run_orbslam3(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera: CameraModel, vocabulary: Path,
-                 progress: bool = True, total: int | None = None, real_time: bool = True) -> PeerRun:
+                 progress: bool = True, real_time: bool = True) -> PeerRun:
     """Track ``(stamp_ns, rgb, depth_m)`` frames (RGB uint8, float32 metres) with ORB-SLAM3 RGB-D, in a child process.
 
     ``real_time``: hand a frame over no earlier than its stamp says (from the first frame's), as ORB-SLAM3's own
