@@ -441,10 +441,14 @@ class MappingConfig:
                                                "for the depth term")
     window_iterations: int = _f(0, 0, 50, doc="after each keyframe, Levenberg-Marquardt steps of the joint photometric "
                                 "optimisation of the local map's keyframe poses (each keyframe's image against the "
-                                "others' points, the oldest held; core/tracking/window.py); 0 = off. Opt-in: at 2, "
-                                "simulated trot / running 8 s 1.11 -> 0.63 / 2.64 -> 1.46 cm and TUM fr1_rpy_300 "
-                                "1.36 -> 1.20, but fr1_rpy every 5th frame from frame 3 2.30 -> 7.96 cm "
-                                "(docs/odometry.md)")
+                                "others' points, the oldest held; core/tracking/window.py); 0 = off, the default; "
+                                "the TUM presets run 2, while the camera is calm (mapping.window_max_turn_deg): "
+                                "TUM fr1_rpy_300 1.36 -> 1.19 cm, its subsamples as without (docs/odometry.md)")
+    window_max_turn_deg: float = _f(4.0, 0.0, 180.0,
+                                    doc="the local window runs after a keyframe only while no turn between "
+                                        "consecutive frames over the last mapping.window_calm_s was larger "
+                                        "(core/odometry/calm.py); 0 = never")
+    window_calm_s: float = _f(0.5, 0.0, 10.0, doc="how long a fast frame keeps the local window from running")
     synchronous: bool = _f(False, doc="ROS nodes: tracking waits for each keyframe it asks mapping for (what "
                            "atsvo-replay does, so node and replay agree pose for pose); false (default): tracking "
                            "goes on against the last map snapshot while mapping inserts the keyframe (PTAM)")

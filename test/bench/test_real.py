@@ -73,14 +73,18 @@ def test_bench_real_runs_ours_and_variants_and_writes_the_table(tmp_path):
     assert args.open3d == [] and args.opencv == ["rgbd"]
     assert main(["real", str(folder), "--open3d", "--quiet", "--out", str(tmp_path / "o"), "--no-orbslam3",
                  "--variant", "few:tracker.max_iterations=5", "--opencv", "rgbd",
-                 "--variant", "window:mapping.window_iterations=2,mapping.min_tracked_fraction=0.99"]) == 0
+                 "--variant", "window:mapping.min_tracked_fraction=0.99",
+                 "--variant", "nowindow:mapping.window_iterations=0"]) == 0
     res = json.loads((tmp_path / "o" / "results.json").read_text())
     seq, = res["sequences"]
     assert seq["preset"] == "tum_fr1" and seq["frames"] == 5
     rows = {r["method"]: r for r in seq["rows"]}
-    assert set(rows) == {"atsvo_ros", "atsvo_ros:paper", "atsvo_ros:few", "atsvo_ros:window", "opencv_rgbd"}
-    # the local window's time per keyframe: none by default, timed when on (a keyframe every frame here)
-    assert rows["atsvo_ros"]["window_ms"] is None and rows["opencv_rgbd"].get("window_ms") is None
+    assert set(rows) == {"atsvo_ros", "atsvo_ros:paper", "atsvo_ros:few", "atsvo_ros:window", "atsvo_ros:nowindow",
+                         "opencv_rgbd"}
+    # the local window's time per keyframe: timed with the TUM preset's window (a keyframe every frame in the
+    # window variant), none with it off or for a peer
+    assert rows["atsvo_ros"]["window_ms"] is not None and rows["opencv_rgbd"].get("window_ms") is None
+    assert rows["atsvo_ros:nowindow"]["window_ms"] is None
     assert rows["atsvo_ros:window"]["keyframes"] >= 3 and rows["atsvo_ros:window"]["window_ms"] > 0
     assert rows["atsvo_ros:few"]["overrides"] == {"tracker.max_iterations": 5}
     for r in rows.values():

@@ -45,6 +45,8 @@ class KeyframeRequest:
     (new points fill the gaps between them). ``reset`` starts a new map from this frame.
     ``rolling_shutter`` (with the frame's velocity) places points seen at other times than the stamp.
     ``geometry_only``: add depth points only (a coasting frame: its colour image did not hold the pose).
+    ``refine``: run the local window optimisation after this keyframe (when mapping has one); false keeps the
+    keyframe's image for later windows but leaves the poses where they are (the camera is turning fast).
     """
 
     snapshot_id: int
@@ -56,6 +58,7 @@ class KeyframeRequest:
     reset: bool = False
     rolling_shutter: RollingShutter | None = None
     geometry_only: bool = False
+    refine: bool = True
 
 
 @dataclass(frozen=True)
@@ -138,19 +141,24 @@ class Mapper:
             self.n_keyframes += 1
             added = len(uv)
             if self.refiner is not None and added:  # a geometry-only keyframe's image did not hold its pose
-                self._refine(kf.kf_id, KeyframeView(frame, None if req.rolling_shutter is None
-                                                    else req.rolling_shutter.frozen(req.T_c_w)))
+                self._keep_view(kf.kf_id, KeyframeView(frame, None if req.rolling_shutter is None
+                                                       else req.rolling_shutter.frozen(req.T_c_w)))
+                if req.refine:
+                    self._refine()
         all_uv = np.concatenate([tracked_uv, uv.astype(np.float64)]) if added else tracked_uv
         ref = assess_health(all_uv, self.camera.width, self.camera.height, 1, mapping)
         self._snapshot_id += 1
         self.snapshot = self._map.snapshot(self._snapshot_id, max(1, ref.n_tracked), ref.healthy_regions)
         return self.snapshot
 
-    def _refine(self, kf_id: int, view: KeyframeView) -> None:
-        """Keep the new keyframe's image and run the window optimisation over the keyframes the map still holds."""
+    def _keep_view(self, kf_id: int, view: KeyframeView) -> None:
+        """Keep the new keyframe's image for the window, and only those of keyframes the map still holds."""
         self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes}
         if kf_id in self._map.keyframes:
             self._views[kf_id] = view
+
+    def _refine(self) -> None:
+        """Run the window optimisation over the keyframes the map still holds."""
         self.last_window = self.refiner.refine(self._map, self._views)
         self.n_windows += 1
         self.window_time_s += self.last_window.time_s

@@ -41,6 +41,7 @@ from atsvo_ros.core.imu import ImuBatch
 from atsvo_ros.core.mapping.map import MapSnapshot
 from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
 from atsvo_ros.core.mapping.ports import InlineMapping, MappingPort
+from atsvo_ros.core.odometry.calm import TurnHistory
 from atsvo_ros.core.odometry.depth_timing import DepthTiming
 from atsvo_ros.core.odometry.event_side import EventSide
 from atsvo_ros.core.odometry.feature_assist import FeatureAssist, rotation_between_deg
@@ -108,6 +109,8 @@ class Odometry:
         self.T_rgb_base = se3_inv(self.T_base_rgb)
         self.R_rgb_imu = config.rig.T_rgb_imu_matrix()[:3, :3]
         self.motion = MotionModel()
+        #: the recent turns between frames: the local window runs only while they are small
+        self.turns = TurnHistory(int(config.mapping.window_calm_s * 1e9), config.mapping.window_max_turn_deg)
         self.events: EventFrontEnd | None = None
         event_cams = None
         if event_camera is not None and config.mode == "fused":
@@ -273,7 +276,8 @@ class Odometry:
             # replaces them, or tracking goes on against blur (measured: 1-2 cm of jitter per frame after a landing)
             refresh = self._blurred_keyframe and not fast and status is TrackingStatus.OK
             if out.health is not None and (out.health.needs_keyframe or refresh):
-                kf = self._insert(self.tracking.keyframe_request(self.frontend.at_colour_time(prepared), out, rs))
+                kf = self._insert(self.tracking.keyframe_request(self.frontend.at_colour_time(prepared), out, rs,
+                                                                 refine=self.turns.calm(stamp, out.T_c_w)))
                 if kf:
                     self._blurred_keyframe = fast
         coasts = self._coasts(out, stamp)
@@ -286,6 +290,7 @@ class Odometry:
         if self._frame_shift is not None:  # the keyframe made from this frame was moved by the local window
             out = dataclasses.replace(out, T_c_w=out.T_c_w @ se3_inv(self._frame_shift))
         self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
+        self.turns.push(stamp, out.T_c_w)
         self._observe_inertial(stamp, out.T_c_w, trusted=status is TrackingStatus.OK)
         if moved and self._anchor is not None and status is TrackingStatus.OK:
             kf = self._reanchor(prepared, out.T_c_w) or kf
@@ -473,6 +478,7 @@ class Odometry:
             return None
         T_wnew_wold = kf.T_w_c @ se3_inv(T_wold_c)
         self.motion.shift_world(T_wnew_wold)
+        self.turns.shift_world(T_wnew_wold)
         for part in (self.velocity, self.inertial):
             if part is not None:
                 part.shift_world(T_wnew_wold)

@@ -230,10 +230,13 @@ class Tracking:
                                                    coast_reason)
 
     def keyframe_request(self, frame: PreparedFrame, outcome: TrackingOutcome,
-                         rolling_shutter: RollingShutter | None = None, geometry_only: bool = False) -> KeyframeRequest:
-        """A request to insert ``frame`` as a keyframe at the tracked pose (``geometry_only``: depth points only)."""
+                         rolling_shutter: RollingShutter | None = None, geometry_only: bool = False,
+                         refine: bool = True) -> KeyframeRequest:
+        """A request to insert ``frame`` as a keyframe at the tracked pose (``geometry_only``: depth points only;
+        ``refine``: run the local window after it)."""
         return KeyframeRequest(self.snapshot.snapshot_id, frame, outcome.T_c_w, outcome.affine, outcome.tracked_uv,
-                               self._outlier_runs.copy(), rolling_shutter=rolling_shutter, geometry_only=geometry_only)
+                               self._outlier_runs.copy(), rolling_shutter=rolling_shutter, geometry_only=geometry_only,
+                               refine=refine)
 
     @staticmethod
     def reset_request(frame: PreparedFrame, T_c_w: np.ndarray,

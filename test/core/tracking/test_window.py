@@ -28,8 +28,9 @@ def _errors(T_w_c: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(E[:3, 3])), float(np.degrees(rotation_angle_rad(E[:3, :3])))
 
 
-def _map_with_a_displaced_keyframe(iterations: int) -> tuple[Mapper, list[int]]:
-    """Three keyframes of a textured box room with exact depth, the newest inserted ``ERROR`` off its true pose."""
+def _map_with_a_displaced_keyframe(iterations: int, refine: bool = True) -> tuple[Mapper, list[int]]:
+    """Three keyframes of a textured box room with exact depth, the newest inserted ``ERROR`` off its true pose
+    (``refine``: the newest keyframe's request asks for the window)."""
     cfg = load_config("synthetic", overrides={"mapping.window_iterations": iterations})
     room = BoxRoom(seed=3)
     fe = RgbdFrontEnd(CAM, 4, cfg.rig.depth_min_m, cfg.rig.depth_max_m, cfg.mapping.depth_edge_ratio)
@@ -39,7 +40,8 @@ def _map_with_a_displaced_keyframe(iterations: int) -> tuple[Mapper, list[int]]:
         frame = fe.prepare(RgbdFrame(k * 100_000_000, img, depth))
         T_est = T_w_c @ ERROR if k == len(TRUE) - 1 else T_w_c
         mapper.insert(KeyframeRequest(mapper.snapshot.snapshot_id, frame, se3_inv(T_est), (0.0, 0.0),
-                                      np.zeros((0, 2)), np.zeros(len(mapper.snapshot), np.int32), reset=k == 0))
+                                      np.zeros((0, 2)), np.zeros(len(mapper.snapshot), np.int32), reset=k == 0,
+                                      refine=refine or k < len(TRUE) - 1))
     return mapper, [kf.kf_id for kf in mapper.snapshot.keyframes]
 
 
@@ -69,6 +71,15 @@ def test_without_the_window_the_keyframe_keeps_the_pose_it_was_given():
     assert mapper.refiner is None and mapper.last_window is None
     kfs = {kf.kf_id: kf for kf in mapper.snapshot.keyframes}
     np.testing.assert_allclose(kfs[ids[-1]].T_w_c, TRUE[-1] @ ERROR, atol=1e-12)
+
+
+def test_a_keyframe_asked_without_refine_keeps_its_pose_and_its_image_waits_for_the_next_window():
+    mapper, ids = _map_with_a_displaced_keyframe(iterations=5, refine=False)
+    kfs = {kf.kf_id: kf for kf in mapper.snapshot.keyframes}
+    np.testing.assert_allclose(kfs[ids[-1]].T_w_c, TRUE[-1] @ ERROR, atol=1e-12)
+    # the windows ran after the first two keyframes only: the last one optimised the second keyframe alone
+    assert mapper.n_windows == 2 and mapper.last_window.keyframes == 1
+    assert ids[-1] in mapper._views  # a later window will take it in
 
 
 def test_a_host_moved_by_xi_moves_its_points_as_the_target_moved_by_minus_its_adjoint():

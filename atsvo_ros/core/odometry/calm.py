@@ -1,0 +1,59 @@
+"""Is the camera calm enough for the local window? The largest turn between consecutive frames, recently.
+
+The local window optimisation (``mapping.window_iterations``) moves the keyframes, and the map with them, by up to
+a centimetre and a degree while tracking goes on against it. At a few degrees per frame that move is small against
+the tracker's basin; at 5-20 degrees per frame (TUM fr1_rpy with frames dropped) the tracker already starts near
+the edge of its basin, and a moved map tipped one run in twelve into a lost, re-initialised map. Turns per frame
+(not per second) are what matters: the basin is in pixels between frames.
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from atsvo_ros.core.geometry import se3_inv, so3_log
+
+
+class TurnHistory:
+    """The camera's turn between consecutive frames over the last ``span_ns``.
+
+    Args:
+        span_ns: how far back a fast frame keeps the window closed.
+        max_turn_deg: the largest turn between consecutive frames that counts as calm (<= 0: never calm).
+    """
+
+    def __init__(self, span_ns: int, max_turn_deg: float) -> None:
+        self.span_ns = int(span_ns)
+        self.max_turn_deg = float(max_turn_deg)
+        self._turns: deque[tuple[int, float]] = deque()  # (stamp of the later frame, turn from the one before)
+        self._last: tuple[int, np.ndarray] | None = None
+
+    def _turn_deg(self, T_c_w: np.ndarray) -> float:
+        if self._last is None:
+            return 0.0
+        R = np.asarray(T_c_w, dtype=np.float64)[:3, :3] @ self._last[1][:3, :3].T
+        return float(np.degrees(np.linalg.norm(so3_log(R))))
+
+    def push(self, stamp_ns: int, T_c_w: np.ndarray) -> None:
+        """Record a frame's pose (in the order the frames were tracked)."""
+        if self._last is not None:
+            self._turns.append((int(stamp_ns), self._turn_deg(T_c_w)))
+        self._last = (int(stamp_ns), np.asarray(T_c_w, dtype=np.float64).copy())
+        while self._turns and self._turns[0][0] < stamp_ns - self.span_ns:
+            self._turns.popleft()
+
+    def calm(self, stamp_ns: int, T_c_w: np.ndarray) -> bool:
+        """No turn within ``span_ns`` before ``stamp_ns`` (this frame's, at ``T_c_w``, included) is above the limit."""
+        if self.max_turn_deg <= 0:
+            return False
+        recent = [t for s, t in self._turns if s >= stamp_ns - self.span_ns]
+        return max([self._turn_deg(T_c_w), *recent]) <= self.max_turn_deg
+
+    def shift_world(self, T_wnew_wold: np.ndarray) -> None:
+        """The world moved (the local window moved the map): the last pose moves with it."""
+        if self._last is not None:
+            self._last = (self._last[0], self._last[1] @ se3_inv(T_wnew_wold))
+
+
+__all__ = ["TurnHistory"]
