@@ -210,6 +210,16 @@ class TrackerConfig:
                                       "it so the depth term combines with them in one system")
     w_depth: float = _f(1.0, 0.0, 1e6, doc="weight of the point-to-plane depth term (0 = the paper's formulation: "
                                            "photometric only)")
+    calm_turn_deg: float = _f(4.0, 0.0, 180.0,
+                              doc="the camera is calm while no turn between consecutive frames over the last "
+                                  "tracker.calm_s (and, for tracking, the constant-motion prediction's) is larger, the "
+                                  "motion is known and that span of frames was seen (core/odometry/calm.py): then "
+                                  "the local window runs and the depth term takes tracker.calm_depth_factor; 0 = never")
+    calm_s: float = _f(0.5, 0.0, 10.0, doc="how long a fast frame keeps the camera from being calm")
+    calm_depth_factor: float = _f(1.0, 0.0, 1.0,
+                                  doc="the depth term's weight is multiplied by this while the camera is calm "
+                                      "(tracker.calm_turn_deg): sharp colour then carries the pose, and the depth "
+                                      "camera's systematic error pulls less; 1 = no change (the TUM presets: 0.25)")
     depth_sigma_at_1m_m: float = _f(0.004, 0.0, 1.0, lo_open=True,
                                     doc="depth noise at 1 m (grows with z^2): the depth term's noise scale")
     depth_sigma_min_m: float = _f(0.002, 0.0, 1.0, lo_open=True, doc="floor of the depth noise scale")
@@ -442,13 +452,8 @@ class MappingConfig:
     window_iterations: int = _f(0, 0, 50, doc="after each keyframe, Levenberg-Marquardt steps of the joint photometric "
                                 "optimisation of the local map's keyframe poses (each keyframe's image against the "
                                 "others' points, the oldest held; core/tracking/window.py); 0 = off, the default; "
-                                "the TUM presets run 2, while the camera is calm (mapping.window_max_turn_deg): "
+                                "the TUM presets run 2, while the camera is calm (tracker.calm_turn_deg): "
                                 "TUM fr1_rpy_300 1.36 -> 1.19 cm, its subsamples as without (docs/odometry.md)")
-    window_max_turn_deg: float = _f(4.0, 0.0, 180.0,
-                                    doc="the local window runs after a keyframe only while no turn between "
-                                        "consecutive frames over the last mapping.window_calm_s was larger "
-                                        "(core/odometry/calm.py); 0 = never")
-    window_calm_s: float = _f(0.5, 0.0, 10.0, doc="how long a fast frame keeps the local window from running")
     synchronous: bool = _f(False, doc="ROS nodes: tracking waits for each keyframe it asks mapping for (what "
                            "atsvo-replay does, so node and replay agree pose for pose); false (default): tracking "
                            "goes on against the last map snapshot while mapping inserts the keyframe (PTAM)")

@@ -16,18 +16,17 @@ from atsvo_ros.core.geometry import se3_inv, so3_log
 
 
 class TurnHistory:
-    """The camera's turn between consecutive frames over the last ``span_ns``.
+    """The camera's turns between consecutive frames over the last ``span_ns``.
 
     Args:
-        span_ns: how far back a fast frame keeps the window closed.
-        max_turn_deg: the largest turn between consecutive frames that counts as calm (<= 0: never calm).
+        span_ns: how far back a fast frame counts.
     """
 
-    def __init__(self, span_ns: int, max_turn_deg: float) -> None:
+    def __init__(self, span_ns: int) -> None:
         self.span_ns = int(span_ns)
-        self.max_turn_deg = float(max_turn_deg)
         self._turns: deque[tuple[int, float]] = deque()  # (stamp of the later frame, turn from the one before)
         self._last: tuple[int, np.ndarray] | None = None
+        self._first_ns: int | None = None  # the first frame pushed: calm needs a whole span of frames seen
 
     def _turn_deg(self, T_c_w: np.ndarray) -> float:
         if self._last is None:
@@ -39,16 +38,23 @@ class TurnHistory:
         """Record a frame's pose (in the order the frames were tracked)."""
         if self._last is not None:
             self._turns.append((int(stamp_ns), self._turn_deg(T_c_w)))
+        elif self._first_ns is None:
+            self._first_ns = int(stamp_ns)
         self._last = (int(stamp_ns), np.asarray(T_c_w, dtype=np.float64).copy())
         while self._turns and self._turns[0][0] < stamp_ns - self.span_ns:
             self._turns.popleft()
 
-    def calm(self, stamp_ns: int, T_c_w: np.ndarray) -> bool:
-        """No turn within ``span_ns`` before ``stamp_ns`` (this frame's, at ``T_c_w``, included) is above the limit."""
-        if self.max_turn_deg <= 0:
-            return False
+    def largest_deg(self, stamp_ns: int, T_c_w: np.ndarray) -> float:
+        """The largest turn within ``span_ns`` before ``stamp_ns``, this frame's (at ``T_c_w``) included."""
         recent = [t for s, t in self._turns if s >= stamp_ns - self.span_ns]
-        return max([self._turn_deg(T_c_w), *recent]) <= self.max_turn_deg
+        return max([self._turn_deg(T_c_w), *recent])
+
+    def calm(self, stamp_ns: int, T_c_w: np.ndarray, max_turn_deg: float) -> bool:
+        """No turn of :meth:`largest_deg` is above ``max_turn_deg`` (<= 0: never calm), and the frames seen span
+        ``span_ns`` (the first frames of a run are not calm: nothing is known of the motion yet)."""
+        if max_turn_deg <= 0 or self._first_ns is None or self._first_ns > stamp_ns - self.span_ns:
+            return False
+        return self.largest_deg(stamp_ns, T_c_w) <= max_turn_deg
 
     def shift_world(self, T_wnew_wold: np.ndarray) -> None:
         """The world moved (the local window moved the map): the last pose moves with it."""

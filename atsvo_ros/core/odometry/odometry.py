@@ -110,7 +110,7 @@ class Odometry:
         self.R_rgb_imu = config.rig.T_rgb_imu_matrix()[:3, :3]
         self.motion = MotionModel()
         #: the recent turns between frames: the local window runs only while they are small
-        self.turns = TurnHistory(int(config.mapping.window_calm_s * 1e9), config.mapping.window_max_turn_deg)
+        self.turns = TurnHistory(int(config.tracker.calm_s * 1e9))
         self.events: EventFrontEnd | None = None
         event_cams = None
         if event_camera is not None and config.mode == "fused":
@@ -216,8 +216,16 @@ class Odometry:
         predicted, gyro, fast, guesses, last, rs, priors = self._predict(stamp)
         # Eq. 4 with the event term when the last two frames moved fast (the paper's relative-motion factor)
         self.tracking.set_event_map(self.event_side.event_map() if fast else None)
+        # the depth term's weight: reduced while the motion is known and slow (tracker.calm_depth_factor)
+        calm_turn = self.config.tracker.calm_turn_deg
+        calm = self.motion.velocity_trusted and self.turns.calm(stamp, predicted, calm_turn)
+        self.tracking.set_calm(calm)
         fused = self.tracking.uses_events(ev_frame)
         out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
+        if calm and self.config.tracker.calm_depth_factor != 1 and not self.turns.calm(stamp, out.T_c_w, calm_turn):
+            # the turn started this frame: the prediction called it calm, the tracked pose does not
+            self.tracking.set_calm(False)
+            out = self.tracking.track(prepared, [out.T_c_w, *guesses], self._affine, last, rs, priors, ev_frame)
         status = TrackingStatus.OK
         if out.verdict.level != OK:
             # The camera outran the map while mapping still inserts a keyframe (asynchronous mapping behind):
@@ -276,8 +284,9 @@ class Odometry:
             # replaces them, or tracking goes on against blur (measured: 1-2 cm of jitter per frame after a landing)
             refresh = self._blurred_keyframe and not fast and status is TrackingStatus.OK
             if out.health is not None and (out.health.needs_keyframe or refresh):
+                calm = self.turns.calm(stamp, out.T_c_w, self.config.tracker.calm_turn_deg)
                 kf = self._insert(self.tracking.keyframe_request(self.frontend.at_colour_time(prepared), out, rs,
-                                                                 refine=self.turns.calm(stamp, out.T_c_w)))
+                                                                 refine=calm))
                 if kf:
                     self._blurred_keyframe = fast
         coasts = self._coasts(out, stamp)

@@ -90,6 +90,14 @@ class Tracking:
         #: the temporary event map N of Eq. 4 (None: the event term is off)
         self.event_map: TemporaryEventMap | None = None
         self._outlier_runs = np.zeros(0, np.int32)
+        #: the depth term's weight for this frame (:meth:`set_calm`)
+        self.depth_weight = config.tracker.w_depth
+
+    def set_calm(self, calm: bool) -> None:
+        """Whether the camera turned little between the recent frames: the depth term then takes
+        ``tracker.calm_depth_factor`` of its weight for the frames tracked from now on."""
+        cfg = self.config.tracker
+        self.depth_weight = cfg.w_depth * (cfg.calm_depth_factor if calm else 1.0)
 
     def set_event_map(self, event_map: TemporaryEventMap | None) -> None:
         """Use ``event_map`` for the event term from the next frame on (None: RGB-D only)."""
@@ -134,10 +142,10 @@ class Tracking:
             # shrinks with it until the cost hardly depends on the pose.
             out.append(rgb_block(cfg, snap.points_w, snap.patches, snap.host_depth, frame, self.cameras,
                                  rolling_shutter, estimate_affine=cfg.affine_brightness and not cfg.zero_mean_patches))
-        if cfg.w_depth > 0 and len(snap.geo_points_w):
+        if self.depth_weight > 0 and len(snap.geo_points_w):
             out.append(GeometricBlock(
                 "depth", snap.geo_points_w, frame.depth_pyramid, self.cameras,
-                T_cam_rgb=np.eye(4) if frame.T_depth_rgb is None else frame.T_depth_rgb, weight=cfg.w_depth,
+                T_cam_rgb=np.eye(4) if frame.T_depth_rgb is None else frame.T_depth_rgb, weight=self.depth_weight,
                 sigma_at_1m_m=cfg.depth_sigma_at_1m_m, sigma_min_m=cfg.depth_sigma_min_m, huber=cfg.depth_huber,
                 outlier=cfg.depth_outlier, edge_ratio=self.config.mapping.depth_edge_ratio,
                 coarse_points=cfg.coarse_level_points))
