@@ -128,6 +128,10 @@ def _field(fields: dict[str, Any], what: str, name: str, typ: type | tuple[type,
     return v
 
 
+def _optional(fields: dict[str, Any], what: str, name: str, default: bool) -> bool:
+    return default if name not in fields else _field(fields, what, name, bool)
+
+
 # ---------------------------------------------------------------------------- keyframe requests
 
 
@@ -167,7 +171,8 @@ def encode_keyframe_request(session: str, seq: int, request: KeyframeRequest, ca
     rs = request.rolling_shutter
     fields = {"session": str(session), "seq": int(seq), "snapshot_id": int(request.snapshot_id),
               "stamp_ns": int(request.frame.stamp_ns), "affine": [float(request.affine[0]), float(request.affine[1])],
-              "reset": bool(request.reset), "n_valid_depth": int(request.frame.n_valid_depth),
+              "reset": bool(request.reset), "geometry_only": bool(request.geometry_only),
+              "refine": bool(request.refine), "n_valid_depth": int(request.frame.n_valid_depth),
               "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
                          "cx": camera.cx, "cy": camera.cy, "n_levels": camera.n_levels},
               "rolling_shutter": None if rs is None else {"t0_s": float(rs.t0_s), "line_s": float(rs.line_s),
@@ -222,7 +227,10 @@ def decode_keyframe_request(data: bytes | bytearray | memoryview) -> WireRequest
     frame = PreparedFrame(stamp, pyramid, depth, [], _field(fields, what, "n_valid_depth", int))
     req = KeyframeRequest(_field(fields, what, "snapshot_id", int), frame, T_c_w,
                           (float(affine[0]), float(affine[1])), tracked_uv, runs,
-                          reset=_field(fields, what, "reset", bool), rolling_shutter=rs)
+                          reset=_field(fields, what, "reset", bool), rolling_shutter=rs,
+                          # absent from an older sender: a full keyframe, refined (what it asked for then)
+                          geometry_only=_optional(fields, what, "geometry_only", False),
+                          refine=_optional(fields, what, "refine", True))
     return WireRequest(_field(fields, what, "session", str), _field(fields, what, "seq", int), req, camera,
                        str(fields.get("config_digest", "")))
 
