@@ -109,8 +109,9 @@ class Odometry:
         self.T_rgb_base = se3_inv(self.T_base_rgb)
         self.R_rgb_imu = config.rig.T_rgb_imu_matrix()[:3, :3]
         self.motion = MotionModel()
-        #: the recent turns between frames: the local window runs only while they are small
+        #: the recent turns between frames: the local window and the lighter depth term run only while they are small
         self.turns = TurnHistory(int(config.tracker.calm_s * 1e9))
+        self._calm_used = config.mapping.window_iterations > 0 or config.tracker.calm_depth_factor != 1
         self.events: EventFrontEnd | None = None
         event_cams = None
         if event_camera is not None and config.mode == "fused":
@@ -218,7 +219,7 @@ class Odometry:
         self.tracking.set_event_map(self.event_side.event_map() if fast else None)
         # the depth term's weight: reduced while the motion is known and slow (tracker.calm_depth_factor)
         calm_turn = self.config.tracker.calm_turn_deg
-        calm = self.motion.velocity_trusted and self.turns.calm(stamp, predicted, calm_turn)
+        calm = self._calm_used and self.motion.velocity_trusted and self.turns.calm(stamp, predicted, calm_turn)
         self.tracking.set_calm(calm)
         fused = self.tracking.uses_events(ev_frame)
         out = self.tracking.track(prepared, guesses, self._affine, last, rs, priors, ev_frame)
@@ -284,7 +285,7 @@ class Odometry:
             # replaces them, or tracking goes on against blur (measured: 1-2 cm of jitter per frame after a landing)
             refresh = self._blurred_keyframe and not fast and status is TrackingStatus.OK
             if out.health is not None and (out.health.needs_keyframe or refresh):
-                calm = self.turns.calm(stamp, out.T_c_w, self.config.tracker.calm_turn_deg)
+                calm = self._calm_used and self.turns.calm(stamp, out.T_c_w, self.config.tracker.calm_turn_deg)
                 kf = self._insert(self.tracking.keyframe_request(self.frontend.at_colour_time(prepared), out, rs,
                                                                  refine=calm))
                 if kf:
@@ -299,7 +300,8 @@ class Odometry:
         if self._frame_shift is not None:  # the keyframe made from this frame was moved by the local window
             out = dataclasses.replace(out, T_c_w=out.T_c_w @ se3_inv(self._frame_shift))
         self.motion.push(stamp, out.T_c_w, trusted=status is not TrackingStatus.DEGRADED or coasts)
-        self.turns.push(stamp, out.T_c_w)
+        if self._calm_used:
+            self.turns.push(stamp, out.T_c_w)
         self._observe_inertial(stamp, out.T_c_w, trusted=status is TrackingStatus.OK)
         if moved and self._anchor is not None and status is TrackingStatus.OK:
             kf = self._reanchor(prepared, out.T_c_w) or kf

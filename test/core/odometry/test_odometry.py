@@ -445,7 +445,7 @@ def test_the_window_runs_only_while_the_camera_is_calm(room, turn_deg, calm_s, r
     """A keyframe asks for the window only when no frame of the last ``tracker.calm_s`` turned more than
     ``tracker.calm_turn_deg`` (4) and that span of frames was seen: not in the first 0.5 s of a run, not at 5 deg per
     frame."""
-    config = load_config("synthetic", overrides={"tracker.calm_s": calm_s})
+    config = load_config("synthetic", overrides={"tracker.calm_s": calm_s, "mapping.window_iterations": 2})
     odo = Odometry(config, CAM)
     odo.mapper.refiner = _MoveTheMap(np.eye(4))
     step = se3_exp(np.array([0.03, 0.0, 0.01, 0.0, np.radians(turn_deg), 0.0]))
@@ -462,7 +462,7 @@ def test_a_keyframe_the_local_window_moved_takes_the_odometry_with_it(room):
     """When mapping moves the keyframe a frame was just inserted as (DSO's tracking reference), that frame's pose and
     the motion the next frames are predicted from move with it: no velocity is taken across the move."""
     # calm from the second frame on (the window runs only while the camera is calm: tracker.calm_s)
-    config = load_config("synthetic", overrides={"tracker.calm_s": 0.0})
+    config = load_config("synthetic", overrides={"tracker.calm_s": 0.0, "mapping.window_iterations": 2})
     odo = Odometry(config, CAM)
     T_wnew_wold = se3_exp(np.array([0.03, -0.02, 0.03, 0.0, np.radians(1.2), np.radians(0.8)]))  # 4.7 cm, 1.4 deg
     odo.mapper.refiner = _MoveTheMap(T_wnew_wold)
