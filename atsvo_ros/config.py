@@ -452,8 +452,9 @@ class MappingConfig:
     window_iterations: int = _f(0, 0, 50, doc="after each keyframe, Levenberg-Marquardt steps of the joint photometric "
                                 "optimisation of the local map's keyframe poses (each keyframe's image against the "
                                 "others' points, the oldest held; core/tracking/window.py); 0 = off, the default; "
-                                "the TUM presets run 2, while the camera is calm (tracker.calm_turn_deg): "
-                                "TUM fr1_rpy_300 1.36 -> 1.19 cm, its subsamples as without (docs/odometry.md)")
+                                "the TUM presets run 2 while the camera is calm (tracker.calm_turn_deg): TUM "
+                                "fr1_rpy_300 1.36 -> 1.15 cm with it alone, its subsamples as without "
+                                "(docs/odometry.md)")
     synchronous: bool = _f(False, doc="ROS nodes: tracking waits for each keyframe it asks mapping for (what "
                            "atsvo-replay does, so node and replay agree pose for pose); false (default): tracking "
                            "goes on against the last map snapshot while mapping inserts the keyframe (PTAM)")

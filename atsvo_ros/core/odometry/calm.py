@@ -1,10 +1,12 @@
-"""Is the camera calm enough for the local window? The largest turn between consecutive frames, recently.
+"""Is the camera calm? The largest turn between consecutive frames over the last span.
 
-The local window optimisation (``mapping.window_iterations``) moves the keyframes, and the map with them, by up to
-a centimetre and a degree while tracking goes on against it. At a few degrees per frame that move is small against
-the tracker's basin; at 5-20 degrees per frame (TUM fr1_rpy with frames dropped) the tracker already starts near
-the edge of its basin, and a moved map tipped one run in twelve into a lost, re-initialised map. Turns per frame
-(not per second) are what matters: the basin is in pixels between frames.
+Two refinements help slow hand-held motion and hurt fast motion, so they run only while the camera is calm:
+the local window optimisation (``mapping.window_iterations``) moves the keyframes, and the map with them, by up to
+a centimetre and a degree under the tracker; a lighter depth term (``tracker.calm_depth_factor``) lets sharp colour
+settle the pose against a depth camera's systematic error. At 5-20 degrees per frame (TUM fr1_rpy with frames
+dropped) the tracker starts near the edge of its basin: a moved map tipped one run in twelve into a lost map, and
+the lighter depth term let wrong poses through. Turns per frame (not per second) are what matters: the basin is in
+pixels between frames.
 """
 from __future__ import annotations
 
