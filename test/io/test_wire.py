@@ -1,6 +1,7 @@
 """The wire format between tracking and mapping processes: exact round trips, clear errors, the CDR carrier."""
 from __future__ import annotations
 
+import dataclasses
 import struct
 
 import numpy as np
@@ -103,8 +104,6 @@ def test_rolling_shutter_and_affine_travel_exactly(session):
     _, odo, log = session
     req = log[1][0]
     rs = RollingShutter(-0.0123456789, 3.3e-5, np.eye(4) + 1e-9, 1 / 30)
-    import dataclasses
-
     req = dataclasses.replace(req, rolling_shutter=rs, affine=(0.1 + 0.2, -1 / 3))
     cam = PinholeLevels(odo.camera.width, odo.camera.height, 1.0, 2.0, 3.0, 4.0, odo.n_levels)
     got = decode_keyframe_request(encode_keyframe_request("x", 1, req, cam)).request
@@ -118,8 +117,6 @@ def test_rolling_shutter_and_affine_travel_exactly(session):
 @pytest.mark.parametrize("geometry_only, refine", [(True, False), (False, False), (False, True)])
 def test_what_mapping_is_asked_to_do_with_a_keyframe_travels(session, geometry_only, refine):
     _, odo, log = session
-    import dataclasses
-
     req = dataclasses.replace(log[1][0], geometry_only=geometry_only, refine=refine)
     cam = PinholeLevels(odo.camera.width, odo.camera.height, 1.0, 2.0, 3.0, 4.0, odo.n_levels)
     got = decode_keyframe_request(encode_keyframe_request("x", 1, req, cam)).request
