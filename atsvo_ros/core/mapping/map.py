@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from atsvo_ros.config import RigConfig
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.geometry import se3_inv, transform_points
 from atsvo_ros.errors import TrackingError
 
@@ -111,6 +112,17 @@ class MapSnapshot:
         return self.keyframes[-1] if self.keyframes else None
 
 
+@dataclass(frozen=True)
+class _Retired:
+    """A keyframe out of the local map, kept with its points so that a camera back over its ground can use it."""
+
+    keyframe: Keyframe
+    points_w: np.ndarray
+    patches: np.ndarray
+    host_depth: np.ndarray
+    geo_points_w: np.ndarray
+
+
 class PointMap:
     """The mutable store behind the snapshots (struct of arrays), owned by the mapper."""
 
@@ -125,6 +137,8 @@ class PointMap:
         self.host_depth = np.zeros(0)
         self.geo_points_w = np.zeros((0, 3))
         self.geo_host = np.zeros(0, dtype=np.int32)
+        #: keyframes culled from the local map with their points, newest last (see :meth:`cull`, :meth:`restore`)
+        self.retired: dict[int, _Retired] = {}
 
     def __len__(self) -> int:
         return len(self.points_w)
@@ -175,21 +189,65 @@ class PointMap:
             self.host_depth = self.host_depth[keep]
         return n
 
-    def cull(self, max_keyframes: int, max_points: int) -> int:
-        """Bound the map: keyframes beyond the window (with their points) and the oldest excess points."""
+    def cull(self, max_keyframes: int, max_points: int, order: list[int] | None = None, memory: int = 0) -> int:
+        """Bound the map: keyframes beyond the window (with their points), then excess points.
+
+        ``order`` ranks the keyframe ids from first to drop to last (default: oldest first); the excess
+        points go in the same order, their host's oldest first. With ``memory`` > 0 the dropped keyframes are
+        retired with their points (the newest ``memory`` kept) instead of deleted.
+        """
+        order = sorted(self.keyframes) if order is None else [k for k in order if k in self.keyframes]
         removed = 0
-        while len(self.keyframes) > max_keyframes:
-            oldest = min(self.keyframes)
-            removed += self.remove_points(self.host == oldest)
-            keep_geo = self.geo_host != oldest
-            self.geo_points_w, self.geo_host = self.geo_points_w[keep_geo], self.geo_host[keep_geo]
-            del self.keyframes[oldest]
+        while len(self.keyframes) > max_keyframes and order:
+            drop = order.pop(0)
+            mine, mine_geo = self.host == drop, self.geo_host == drop
+            if memory > 0:
+                self.retired[drop] = _Retired(self.keyframes[drop], self.points_w[mine], self.patches[:, mine],
+                                              self.host_depth[mine], self.geo_points_w[mine_geo])
+            removed += self.remove_points(mine)
+            self.geo_points_w, self.geo_host = self.geo_points_w[~mine_geo], self.geo_host[~mine_geo]
+            del self.keyframes[drop]
+        for k in sorted(self.retired)[:max(0, len(self.retired) - memory)]:
+            del self.retired[k]
         excess = len(self) - max_points
-        if excess > 0:  # hosts are in insertion order, so the first points are the oldest
+        if excess > 0:  # within a host, points are in insertion order
+            rank = np.full(max(self.keyframes, default=0) + 1, len(order), dtype=np.int64)
+            rank[np.asarray(order, dtype=np.int64)] = np.arange(len(order))
             mask = np.zeros(len(self), dtype=bool)
-            mask[np.argsort(self.host, kind="stable")[:excess]] = True
+            mask[np.argsort(rank[self.host], kind="stable")[:excess]] = True
             removed += self.remove_points(mask)
         return removed
+
+    def restore(self, kf_id: int) -> None:
+        """Bring retired keyframe ``kf_id`` and its points back into the local map."""
+        r = self.retired.pop(kf_id)
+        self.keyframes[kf_id] = r.keyframe
+        self.points_w = np.concatenate([self.points_w, r.points_w])
+        self.patches = np.ascontiguousarray(np.concatenate([self.patches, r.patches], axis=1))
+        self.host = np.concatenate([self.host, np.full(len(r.points_w), kf_id, dtype=np.int32)])
+        self.host_depth = np.concatenate([self.host_depth, r.host_depth])
+        self.geo_points_w = np.concatenate([self.geo_points_w, r.geo_points_w])
+        self.geo_host = np.concatenate([self.geo_host, np.full(len(r.geo_points_w), kf_id, dtype=np.int32)])
+
+    def visible_shares(self, T_c_w: np.ndarray, camera: CameraModel, max_scale_change: float) -> dict[int, float]:
+        """Per keyframe, in the map or retired: the share of its points a camera at ``T_c_w`` sees in front of it,
+        inside its image and at a distance within ``max_scale_change`` times the host's (a patch seen much nearer
+        or further no longer matches). Photometric points; a keyframe hosting none is judged by its depth points."""
+        c_new = -T_c_w[:3, :3].T @ T_c_w[:3, 3]
+        groups = [(k, self.points_w[self.host == k], self.geo_points_w[self.geo_host == k], self.keyframes[k])
+                  for k in self.keyframes]
+        groups += [(k, r.points_w, r.geo_points_w, r.keyframe) for k, r in self.retired.items()]
+        shares = {}
+        for k, points, geo, kf in groups:
+            p = points if len(points) else geo
+            if not len(p):
+                shares[k] = 0.0
+                continue
+            uv, front = camera.project(transform_points(T_c_w, p))
+            ratio = np.linalg.norm(p - c_new, axis=1) / np.maximum(np.linalg.norm(p - kf.T_w_c[:3, 3], axis=1), 1e-9)
+            seen = front & camera.in_image(uv) & (ratio < max_scale_change) & (ratio > 1.0 / max_scale_change)
+            shares[k] = float(seen.mean())
+        return shares
 
     def snapshot(self, snapshot_id: int, n_reference: int, healthy_reference: int) -> MapSnapshot:
         """An immutable copy for tracking."""

@@ -3,7 +3,8 @@
 Tracking decides *when* a keyframe is needed (the nine-region rule against the reference health
 the snapshot carries) and sends a :class:`KeyframeRequest`; the mapper owns the point map, selects
 and back-projects new points where the tracked ones leave gaps, culls what tracking reported as
-repeated outliers and what fell out of the keyframe window, and returns a new immutable
+repeated outliers and what fell out of the keyframe window (retired, and taken back when the camera
+returns over its ground: ``mapping.keyframe_culling``), and returns a new immutable
 :class:`~atsvo_ros.core.mapping.map.MapSnapshot`. Nothing here reads tracking state directly, so the
 mapper can run in the tracking thread (the replay), in a thread of its own or in another process.
 """
@@ -137,7 +138,8 @@ class Mapper:
                 geo_c = req.rolling_shutter.to_stamp(geo_c, geo_uv[:, 1], req.T_c_w)
             patches = extract_patches(frame.pyramid, uv, RGB_PATTERN, affine)
             kf = self._map.add_keyframe(frame.stamp_ns, se3_inv(req.T_c_w), affine, p_c, patches, geo_c)
-            self._map.cull(mapping.max_keyframes, mapping.max_points)
+            self._map.cull(mapping.max_keyframes, mapping.max_points, self._cull_order(kf.kf_id, req.T_c_w),
+                           mapping.memory_keyframes if mapping.keyframe_culling == "covisible" else 0)
             self.n_keyframes += 1
             added = len(uv)
             if self.refiner is not None and added:  # a geometry-only keyframe's image did not hold its pose
@@ -151,9 +153,35 @@ class Mapper:
         self.snapshot = self._map.snapshot(self._snapshot_id, max(1, ref.n_tracked), ref.healthy_regions)
         return self.snapshot
 
+    def _cull_order(self, newest: int, T_c_w: np.ndarray) -> list[int]:
+        """Keyframe ids from first to leave the map to last (``mapping.keyframe_culling``); ``max_keyframes`` stay.
+
+        ``covisible``: the newest ``mapping.recent_keyframes`` stay; the other places go to the newest keyframes,
+        in the map or retired, that see at least ``mapping.covisible_min_share`` of their points from the new
+        keyframe's pose, then to the newest of the rest. A camera back over ground it mapped before (a flip's
+        landing, a hand-held sweep) so tracks against those older, less drifted points again, not only against
+        the keyframes made on the way.
+        """
+        mapping = self.config.mapping
+        if mapping.keyframe_culling != "covisible":
+            return sorted(self._map.keyframes)
+        shares = self._map.visible_shares(T_c_w, self.camera, mapping.covisible_max_scale_change)
+        newest_first = sorted(shares, reverse=True)
+        recent, rest = newest_first[:mapping.recent_keyframes], newest_first[mapping.recent_keyframes:]
+        seeing = [k for k in rest if shares[k] >= mapping.covisible_min_share]
+        fill = [k for k in rest if shares[k] < mapping.covisible_min_share]
+        places = max(0, mapping.max_keyframes - len(recent))
+        kept_seeing, kept_fill = seeing[:places], fill[:max(0, places - len(seeing))]
+        for k in kept_seeing + kept_fill:
+            if k in self._map.retired:
+                self._map.restore(k)
+        keep = [*sorted(kept_fill), *sorted(kept_seeing), *sorted(recent)]  # excess points go in this order too
+        return [k for k in sorted(self._map.keyframes) if k not in keep] + keep
+
     def _keep_view(self, kf_id: int, view: KeyframeView) -> None:
-        """Keep the new keyframe's image for the window, and only those of keyframes the map still holds."""
-        self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes}
+        """Keep the new keyframe's image for the window, and those of keyframes the map holds or has retired (a
+        keyframe taken back joins the window again)."""
+        self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes or k in self._map.retired}
         if kf_id in self._map.keyframes:
             self._views[kf_id] = view
 

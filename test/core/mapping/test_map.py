@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from atsvo_ros.config import RigConfig
+from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.events.event_map import TemporaryEventMap
 from atsvo_ros.core.geometry import se3_exp, transform_points
 from atsvo_ros.core.image.photometric import ATS_PATTERN, RGB_PATTERN, bilinear, extract_patches, level_position
@@ -109,3 +110,42 @@ def test_snapshots_are_immutable_copies():
 def test_temporary_event_map_container():
     ev = TemporaryEventMap.empty(3, 14)
     assert len(ev) == 0 and ev.patches.shape == (3, 0, 14)
+
+
+def test_retired_keyframes_come_back_with_their_points():
+    m = PointMap(2, 9)
+    kf0 = _add(m, 6, se3_exp(np.array([0.5, 0.0, 0.0, 0.0, 0.2, 0.0])))
+    points, patches, geo = m.points_w.copy(), m.patches.copy(), m.geo_points_w.copy()
+    for _ in range(3):
+        _add(m, 4)
+    m.cull(max_keyframes=2, max_points=1000, memory=1)  # kf 0 and 1 leave; only the newest of them is kept aside
+    assert sorted(m.keyframes) == [2, 3] and list(m.retired) == [1]
+    m.cull(max_keyframes=2, max_points=1000, order=[2, 3, 0, 1], memory=0)  # nothing to drop; the memory empties
+    assert not m.retired
+    m = PointMap(2, 9)
+    kf0 = _add(m, 6, se3_exp(np.array([0.5, 0.0, 0.0, 0.0, 0.2, 0.0])))
+    _add(m, 4)
+    m.cull(max_keyframes=1, max_points=1000, memory=5)
+    assert list(m.keyframes) == [1] and len(m) == 4 and len(m.geo_points_w) == 2
+    m.restore(kf0.kf_id)
+    mine = m.host == kf0.kf_id
+    assert sorted(m.keyframes) == [0, 1] and not m.retired and len(m) == 10
+    assert np.array_equal(m.points_w[mine], points) and np.array_equal(m.patches[:, mine], patches)
+    assert np.array_equal(m.geo_points_w[m.geo_host == kf0.kf_id], geo) and m.keyframes[0] == kf0
+
+
+def test_visible_shares_count_points_in_view_at_a_similar_distance():
+    cam = CameraModel(320, 240, 200.0, 200.0, 159.5, 119.5)
+    m = PointMap(2, 9)
+    _add(m, 4)  # every point 2 m ahead of the origin
+    for k in range(3):
+        m.add_keyframe(1 + k, np.eye(4), (0.0, 0.0), np.array([[0.0, 0.0, 2.0], [5.0, 0.0, 2.0]]),
+                       np.zeros((2, 2, 9), np.float32))  # one point in view, one far outside
+    shares = m.visible_shares(np.eye(4), cam, max_scale_change=1.3)
+    assert shares == {0: 1.0, 1: 0.5, 2: 0.5, 3: 0.5}
+    back = np.eye(4)
+    back[2, 3] = 1.0  # T_c_w of a camera 1 m behind the origin: the points are 1.5x further
+    assert m.visible_shares(back, cam, max_scale_change=1.3)[0] == 0.0
+    assert m.visible_shares(back, cam, max_scale_change=2.0)[0] == 1.0
+    turned = se3_exp(np.array([0.0, 0.0, 0.0, 0.0, np.pi, 0.0]))  # looking the other way
+    assert set(m.visible_shares(turned, cam, max_scale_change=1.3).values()) == {0.0}

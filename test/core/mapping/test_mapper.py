@@ -6,7 +6,7 @@ import numpy as np
 from atsvo_ros.config import load_config
 from atsvo_ros.core.camera import CameraModel
 from atsvo_ros.core.frame import RgbdFrame
-from atsvo_ros.core.geometry import se3_exp
+from atsvo_ros.core.geometry import se3_exp, se3_inv
 from atsvo_ros.core.image.frontend import RgbdFrontEnd
 from atsvo_ros.core.mapping.mapper import KeyframeRequest, Mapper
 from test.core.render_helpers import BoxRoom
@@ -75,3 +75,25 @@ def test_a_geometry_only_keyframe_adds_depth_points_and_no_patches():
                                        np.zeros(len(s0), np.int32), geometry_only=True))
     assert len(s1) == len(s0) and len(s1.keyframes) == 2  # no photometric point from a frame that did not hold
     assert len(s1.geo_points_w) - len(s0.geo_points_w) > 0.5 * cfg.mapping.depth_points
+
+
+def _look_around_and_back(culling: str):
+    """Keyframes looking round the box room (0, 90, 180, 270 deg of yaw) and then back at its first wall."""
+    cfg = load_config("synthetic", overrides={"mapping.max_keyframes": 2, "mapping.recent_keyframes": 1,
+                                              "mapping.keyframe_culling": culling})
+    room, f0, mapper, snap = _first_keyframe(cfg)
+    for k, yaw in enumerate((np.pi / 2, np.pi, 1.5 * np.pi, 2 * np.pi - 0.05), start=1):
+        T_w_c = se3_exp(np.array([0.0, 0.0, 0.0, 0.0, yaw, 0.0]))
+        _, f = _prepared(room, T_w_c, k * 33_000_000)
+        snap = mapper.insert(KeyframeRequest(snap.snapshot_id, f, se3_inv(T_w_c), (0.0, 0.0), np.zeros((0, 2)),
+                                             np.zeros(len(snap), np.int32)))
+    return snap
+
+
+def test_a_camera_back_over_mapped_ground_gets_the_keyframe_that_mapped_it():
+    """``mapping.keyframe_culling`` covisible: the first keyframe, retired while the camera looked round the room,
+    is back in the local map once the camera faces its wall again (the newest keyframe,
+    ``mapping.recent_keyframes``, stays); with ``oldest`` the map holds only the two newest."""
+    snap = _look_around_and_back("covisible")
+    assert [kf.kf_id for kf in snap.keyframes] == [0, 4] and np.count_nonzero(snap.host == 0) > 300
+    assert [kf.kf_id for kf in _look_around_and_back("oldest").keyframes] == [3, 4]
