@@ -452,8 +452,8 @@ class MappingConfig:
                                    "0, 10-16) mean ATE 7.20 -> 4.06 cm, held-out flips 100-102 4.20 -> 1.71; TUM "
                                    "fr1_rpy_300 0.96 -> 0.87, every 2nd / 3rd frame 1.44 / 1.45 -> 0.98 / 1.03 "
                                    "(docs/odometry.md)")
-    memory_keyframes: int = _f(30, 0, 10000, doc="keyframes kept aside with their points (and, with the window, "
-                               "their images) after leaving the local map, for mapping.keyframe_culling covisible")
+    memory_keyframes: int = _f(30, 0, 10000, doc="keyframes kept aside with their points after leaving the "
+                               "local map, for mapping.keyframe_culling covisible")
     recent_keyframes: int = _f(2, 1, 1000, doc="the newest keyframes that always stay in the local map "
                                "(mapping.keyframe_culling covisible)")
     covisible_min_share: float = _f(0.5, 0.0, 1.0, doc="share of its points an older keyframe must show the new "

@@ -44,9 +44,11 @@ def test_orbslam3_tracks_real_frames_with_a_vocabulary_trained_here(realdata, tm
     assert len(run.ok) == 90 and run.ok.sum() >= 88
     s = score(reader.ground_truth(), run.stamps_ns, run.T_world_cam, run.ok)
     print(f"ORB-SLAM3 on fr1_rpy frames 0-89: ATE {s['ate_cm']:.2f} cm, RPE {s['rpe_deg_per_frame']:.3f} deg/f")
-    # measured 2.7-3.6 cm and ~0.5 deg/f here (ORB-SLAM3 is not deterministic); the camera turns 2.3 deg/f (RMS)
-    # over a 26 cm path, so a run that lost the motion (a broken vocabulary, calibration or depth scale) fails both
-    assert s["ate_cm"] < 5.0 and s["rpe_deg_per_frame"] < 1.0
+    # ORB-SLAM3 is not deterministic (its mapping thread races tracking): 38 runs here gave 2.46-4.34 cm and
+    # 0.59-0.71 deg/f (idle, beside one and two busy cores), one CI run 5.96 cm. The camera turns 2.3 deg/f (RMS)
+    # over a 26 cm path. The depth in the wrong unit by 2x gave 11.06 cm and 20.3 deg/f, a run without motion does
+    # not align at all. (A focal length 15% off is not caught here, 2.40 cm: the settings test above covers that.)
+    assert s["ate_cm"] < 8.0 and s["rpe_deg_per_frame"] < 1.0
     # metric: the depth reached it in metres. A Sim(3) fit's scale, measured 0.59-0.63 (biased low by the error
     # on this short, mostly rotating path); depth in the wrong unit (DepthMapFactor 5000) gave 1569
     scale = evaluate(reader.ground_truth(), run.trajectory(), EvalOptions(align="sim3")).extra["alignment"]["scale"]

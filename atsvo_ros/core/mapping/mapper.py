@@ -179,9 +179,9 @@ class Mapper:
         return [k for k in sorted(self._map.keyframes) if k not in keep] + keep
 
     def _keep_view(self, kf_id: int, view: KeyframeView) -> None:
-        """Keep the new keyframe's image for the window, and those of keyframes the map holds or has retired (a
-        keyframe taken back joins the window again)."""
-        self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes or k in self._map.retired}
+        """Keep the new keyframe's image for the window and drop those of keyframes the map no longer holds (a
+        retired keyframe taken back is tracked against, not refined: keeping its image measured no gain)."""
+        self._views = {k: v for k, v in self._views.items() if k in self._map.keyframes}
         if kf_id in self._map.keyframes:
             self._views[kf_id] = view
 
