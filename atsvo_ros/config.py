@@ -351,6 +351,11 @@ class TrackerConfig:
                                       "noise. Tuning seeds 0-9 (2.5 s, 640x480, fused + IMU) backflip mean ATE 4.39 "
                                       "-> 3.18 cm at 0.003, but held-out seeds 100-102 (10 s) 4.20 -> 5.30, bound "
                                       "2.65 -> 2.32 (docs/odometry.md)")
+    imu_dead_reckoning_s: float = _f(0.5, 0.0, 10.0,
+                                     doc="with an IMU (tracker.imu_translation), after frames that were not trusted "
+                                         "the first guess (and a lost frame's published pose) comes from the IMU "
+                                         "alone, integrated from the state fitted at the last trusted frame, for at "
+                                         "most this long; 0 = constant motion from the last pose")
     max_coast_s: float = _f(0.3, 0.0, 10.0, doc="how long tracking may coast on the depth term and the motion prior "
                             "when no image term holds (frames reported degraded; mid-flip a camera faces a blank "
                             "floor for 3-5 frames, a Mini-Cheetah flip's flight lasts ~0.3 s); 0 = never")

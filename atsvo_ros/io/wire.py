@@ -171,7 +171,8 @@ def encode_keyframe_request(session: str, seq: int, request: KeyframeRequest, ca
     rs = request.rolling_shutter
     fields = {"session": str(session), "seq": int(seq), "snapshot_id": int(request.snapshot_id),
               "stamp_ns": int(request.frame.stamp_ns), "affine": [float(request.affine[0]), float(request.affine[1])],
-              "reset": bool(request.reset), "geometry_only": bool(request.geometry_only),
+              "reset": bool(request.reset), "keep_memory": bool(request.keep_memory),
+              "geometry_only": bool(request.geometry_only),
               "refine": bool(request.refine), "n_valid_depth": int(request.frame.n_valid_depth),
               "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
                          "cx": camera.cx, "cy": camera.cy, "n_levels": camera.n_levels},
@@ -230,7 +231,8 @@ def decode_keyframe_request(data: bytes | bytearray | memoryview) -> WireRequest
                           reset=_field(fields, what, "reset", bool), rolling_shutter=rs,
                           # absent from an older sender: a full keyframe, refined (what it asked for then)
                           geometry_only=_optional(fields, what, "geometry_only", False),
-                          refine=_optional(fields, what, "refine", True))
+                          refine=_optional(fields, what, "refine", True),
+                          keep_memory=_optional(fields, what, "keep_memory", False))
     return WireRequest(_field(fields, what, "session", str), _field(fields, what, "seq", int), req, camera,
                        str(fields.get("config_digest", "")))
 

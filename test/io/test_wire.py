@@ -114,13 +114,14 @@ def test_rolling_shutter_and_affine_travel_exactly(session):
     assert got.T_c_w.tobytes() == np.asarray(req.T_c_w, dtype=np.float64).tobytes()
 
 
-@pytest.mark.parametrize("geometry_only, refine", [(True, False), (False, False), (False, True)])
-def test_what_mapping_is_asked_to_do_with_a_keyframe_travels(session, geometry_only, refine):
+@pytest.mark.parametrize("geometry_only, refine, keep_memory",
+                         [(True, False, False), (False, False, False), (False, True, False), (False, True, True)])
+def test_what_mapping_is_asked_to_do_with_a_keyframe_travels(session, geometry_only, refine, keep_memory):
     _, odo, log = session
-    req = dataclasses.replace(log[1][0], geometry_only=geometry_only, refine=refine)
+    req = dataclasses.replace(log[1][0], geometry_only=geometry_only, refine=refine, keep_memory=keep_memory)
     cam = PinholeLevels(odo.camera.width, odo.camera.height, 1.0, 2.0, 3.0, 4.0, odo.n_levels)
     got = decode_keyframe_request(encode_keyframe_request("x", 1, req, cam)).request
-    assert (got.geometry_only, got.refine) == (geometry_only, refine)
+    assert (got.geometry_only, got.refine, got.keep_memory) == (geometry_only, refine, keep_memory)
 
 
 def test_bad_bytes_raise_wire_errors_that_say_what(session):

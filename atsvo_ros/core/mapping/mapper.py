@@ -43,7 +43,9 @@ class KeyframeRequest:
 
     ``outlier_runs`` counts, per photometric point of snapshot ``snapshot_id``, the consecutive
     frames in which it was an outlier; ``tracked_uv`` are the inlier points' pixels in this frame
-    (new points fill the gaps between them). ``reset`` starts a new map from this frame.
+    (new points fill the gaps between them). ``reset`` starts a new map from this frame; with ``keep_memory``
+    (a re-initialisation after a loss: the world frame goes on) the old map's keyframes are kept aside and can come
+    back (``mapping.keyframe_culling`` covisible), where a first map or its rebuild forgets them.
     ``rolling_shutter`` (with the frame's velocity) places points seen at other times than the stamp.
     ``geometry_only``: add depth points only (a coasting frame: its colour image did not hold the pose).
     ``refine``: run the local window optimisation after this keyframe (when mapping has one); false keeps the
@@ -60,6 +62,7 @@ class KeyframeRequest:
     rolling_shutter: RollingShutter | None = None
     geometry_only: bool = False
     refine: bool = True
+    keep_memory: bool = False
 
 
 @dataclass(frozen=True)
@@ -113,7 +116,10 @@ class Mapper:
                                 "its points sit on colour pixels")
         mapping, sel = self.config.mapping, self.config.rgb_selection
         if req.reset:
-            self._map = PointMap(self.n_levels, len(RGB_PATTERN))
+            if req.keep_memory and mapping.keyframe_culling == "covisible" and mapping.memory_keyframes > 0:
+                self._map.cull(0, mapping.max_points, None, mapping.memory_keyframes)  # all retired
+            else:
+                self._map = PointMap(self.n_levels, len(RGB_PATTERN))
             self._views = {}
         elif req.snapshot_id == self.snapshot.snapshot_id and len(req.outlier_runs) == len(self._map):
             self._map.remove_points(req.outlier_runs >= mapping.max_outlier_frames)

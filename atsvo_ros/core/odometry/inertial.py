@@ -147,6 +147,34 @@ class InertialPredictor:
         v2 = v1 + g_w * dt12 + R_w_i1 @ pre12.dv_m_s
         return self._camera(imu, int(stamp_ns), p2, v2, R_w_i1 @ pre12.R_i0_i1, measured=False)
 
+    def dead_reckon(self, imu: ImuBatch, window: VelocityWindow, stamp_ns: int,
+                    max_gap_ns: int) -> tuple[np.ndarray, CameraMotion] | None:
+        """The colour camera's pose ``T_c_w`` and motion at ``stamp_ns`` from the IMU alone, integrated from the state
+        fitted to ``window`` at its newest trusted pose when that is at most ``max_gap_ns`` old (None otherwise,
+        before a gravity estimate or when the IMU does not cover the span).
+
+        What carries the pose through frames that neither the image nor the depth held (a flip's flight): constant
+        motion would go on from the last, possibly wrong, pose at its velocity.
+        """
+        g_w = self.gravity_w
+        newest = window.newest_ns
+        if g_w is None or newest is None or not 0 < int(stamp_ns) - newest <= int(max_gap_ns):
+            return None
+        state = window.fit(imu, g_w)
+        if state is None:
+            return None
+        try:
+            pre = preintegrate(imu, state.stamp_ns, int(stamp_ns))
+        except ImuError:
+            return None
+        dt = pre.dt_s
+        p = state.p_w + state.v_w * dt + 0.5 * g_w * dt * dt + state.R_w_i @ pre.dp_m
+        v = state.v_w + g_w * dt + state.R_w_i @ pre.dv_m_s
+        T_w_i = np.eye(4)
+        T_w_i[:3, :3], T_w_i[:3, 3] = state.R_w_i @ pre.R_i0_i1, p
+        measured = not clipped(imu, window.oldest_ns, int(stamp_ns), self.accel_range_m_s2)
+        return se3_inv(T_w_i @ se3_inv(self.T_c_imu)), self._camera(imu, int(stamp_ns), p, v, T_w_i[:3, :3], measured)
+
     def _from_window(self, imu: ImuBatch, g_w: np.ndarray, last_ns: int, stamp_ns: int) -> CameraMotion | None:
         """The prediction from the window's fitted state, when the last frame is the window's newest pose."""
         if self.window is None or self.window.newest_ns != last_ns or not last_ns < stamp_ns:

@@ -47,7 +47,7 @@ from atsvo_ros.core.odometry.event_side import EventSide
 from atsvo_ros.core.odometry.feature_assist import FeatureAssist, rotation_between_deg
 from atsvo_ros.core.odometry.gyro import GyroBuffer
 from atsvo_ros.core.odometry.imu_state import VelocityWindow
-from atsvo_ros.core.odometry.inertial import STANDARD_GRAVITY, InertialPredictor
+from atsvo_ros.core.odometry.inertial import STANDARD_GRAVITY, CameraMotion, InertialPredictor
 from atsvo_ros.core.odometry.output import ResultBuilder
 from atsvo_ros.core.odometry.prediction import Predictor
 from atsvo_ros.core.odometry.timing import FrameTiming
@@ -263,7 +263,9 @@ class Odometry:
             if best is None:
                 self.last_loss_reason = out.verdict.reason
                 self.event_side.end_frame(n_events)
-                return self._reinitialise(prepared, stamp, predicted, t0, out.verdict.reason, ev_frame, raw, moved)
+                # the new map starts where the gyro (and the IMU since the last trusted frame) put the camera
+                start = predicted if gyro is None else gyro
+                return self._reinitialise(prepared, stamp, start, t0, out.verdict.reason, ev_frame, raw, moved)
             out, fused, status = best
         # without a gyro nothing else vouches for a fast frame's rotation (with one, the gyro check does)
         if (status is not TrackingStatus.DEGRADED and gyro is None
@@ -507,12 +509,24 @@ class Odometry:
         predicted = self.motion.predict(stamp)
         imu = self.predictor.imu_motion(stamp) if self.config.tracker.imu_translation else None
         gyro = self.predictor.gyro_pose(stamp, None if imu is None else imu.centre_w)
+        reckoned = self._dead_reckoned(stamp) if imu is None else None
+        if reckoned is not None:
+            gyro, imu = reckoned
         fast = self.predictor.is_fast()
         guesses = self.predictor.guesses(stamp, predicted, gyro, fast, self.event_side.rate_ratio())
         last = self.motion.last[1] if self.motion.last else predicted
         rs = self.predictor.rolling_shutter(stamp)
         priors = self.predictor.priors(stamp, gyro, imu)
         return predicted, gyro, fast, guesses, last, rs, priors
+
+    def _dead_reckoned(self, stamp: int) -> tuple[np.ndarray, CameraMotion] | None:
+        """After frames that were not trusted (lost, degraded): the pose from the IMU alone since the last trusted
+        frame, at most ``tracker.imu_dead_reckoning_s`` back; None when constant motion is to be used."""
+        limit_s = self.config.tracker.imu_dead_reckoning_s
+        if (limit_s <= 0 or self.inertial is None or self.velocity is None or not self.gyro
+                or self.motion.velocity_trusted or not self.config.tracker.imu_translation):
+            return None
+        return self.inertial.dead_reckon(self.gyro.samples(), self.velocity, stamp, int(limit_s * 1e9))
 
     def _unmappable(self, prepared: PreparedFrame, T_c_w: np.ndarray) -> str | None:
         """Why a map built from this frame alone would not constrain the pose (None when it would).
@@ -567,16 +581,20 @@ class Odometry:
         """
         prepared = self.frontend.at_colour_time(prepared)  # the map's points sit on colour pixels
         why_not = self._unmappable(prepared, predicted)
-        ok = why_not is None and self._insert(Tracking.reset_request(prepared, predicted)) and self.tracking.has_map
+        ok = (why_not is None and self._insert(Tracking.reset_request(prepared, predicted, keep_memory=True))
+              and self.tracking.has_map)
         t_track = time.perf_counter() - t0
         if ok:
             self._affine = (0.0, 0.0)
             self._blurred_keyframe = self.predictor.is_fast()  # a new map from mid-turn: replace it once the turn slows
             self.motion.reset()
-            if self.inertial is not None:
+            # The world goes on (the new map starts at the predicted pose): with dead reckoning the IMU's trusted
+            # poses stay, so the frames after this one are predicted from the last trusted state, not from this guess
+            keep_imu = self.config.tracker.imu_dead_reckoning_s > 0
+            if self.inertial is not None and not keep_imu:
                 self.inertial.reset()
             self._new_map(stamp, raw if raw is not None else prepared, predicted, moved, prepared is not raw)
-            if self.velocity is not None:
+            if self.velocity is not None and not keep_imu:
                 self.velocity.reset()
         else:
             reason = f"{reason}; {why_not}" if reason else why_not

@@ -247,11 +247,11 @@ class Tracking:
                                refine=refine)
 
     @staticmethod
-    def reset_request(frame: PreparedFrame, T_c_w: np.ndarray,
-                      rolling_shutter: RollingShutter | None = None) -> KeyframeRequest:
-        """A request to start a new map from ``frame`` at ``T_c_w``."""
+    def reset_request(frame: PreparedFrame, T_c_w: np.ndarray, rolling_shutter: RollingShutter | None = None,
+                      keep_memory: bool = False) -> KeyframeRequest:
+        """A request to start a new map from ``frame`` at ``T_c_w`` (``keep_memory``: the old keyframes kept aside)."""
         return KeyframeRequest(-1, frame, T_c_w, (0.0, 0.0), np.zeros((0, 2)), np.zeros(0, np.int32), reset=True,
-                               rolling_shutter=rolling_shutter)
+                               rolling_shutter=rolling_shutter, keep_memory=keep_memory)
 
     def _failed(self, T_c_w: np.ndarray, affine: tuple[float, float], reason: str) -> TrackingOutcome:
         return TrackingOutcome(None, Verdict.lost(reason), np.asarray(T_c_w, dtype=np.float64).copy(), affine,

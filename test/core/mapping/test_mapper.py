@@ -97,3 +97,28 @@ def test_a_camera_back_over_mapped_ground_gets_the_keyframe_that_mapped_it():
     snap = _look_around_and_back("covisible")
     assert [kf.kf_id for kf in snap.keyframes] == [0, 4] and np.count_nonzero(snap.host == 0) > 300
     assert [kf.kf_id for kf in _look_around_and_back("oldest").keyframes] == [3, 4]
+
+
+def _lost_and_back(keep_memory: bool):
+    """The first keyframe faces a wall; the camera turns away and loses the map (a new map from a frame facing the
+    opposite wall), then turns back: the keyframe after the turn back, and the map it leaves."""
+    cfg = load_config("synthetic", overrides={"mapping.max_keyframes": 2, "mapping.recent_keyframes": 1})
+    room, _, mapper, _ = _first_keyframe(cfg)
+    T_away = se3_exp(np.array([0.0, 0.0, 0.0, 0.0, np.pi, 0.0]))
+    _, f1 = _prepared(room, T_away, 33_000_000)
+    snap = mapper.insert(KeyframeRequest(-1, f1, se3_inv(T_away), (0.0, 0.0), np.zeros((0, 2)),
+                                         np.zeros(0, np.int32), reset=True, keep_memory=keep_memory))
+    T_back = se3_exp(np.array([0.0, 0.0, 0.0, 0.0, 0.05, 0.0]))
+    _, f2 = _prepared(room, T_back, 66_000_000)
+    return mapper.insert(KeyframeRequest(snap.snapshot_id, f2, se3_inv(T_back), (0.0, 0.0), np.zeros((0, 2)),
+                                         np.zeros(len(snap), np.int32)))
+
+
+def test_a_reinitialisation_keeps_the_old_map_aside_and_takes_it_back():
+    """After a loss the world goes on (the new map starts at the predicted pose): the old map's keyframes are kept
+    aside and the first keyframe comes back once the camera faces its wall again. A first map or its rebuild
+    (``keep_memory`` false) forgets them."""
+    kept = _lost_and_back(True)
+    assert [kf.stamp_ns for kf in kept.keyframes] == [0, 66_000_000]
+    assert np.count_nonzero(kept.host == kept.keyframes[0].kf_id) > 300
+    assert [kf.stamp_ns for kf in _lost_and_back(False).keyframes] == [33_000_000, 66_000_000]
