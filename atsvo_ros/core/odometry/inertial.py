@@ -23,7 +23,7 @@ import numpy as np
 
 from atsvo_ros.core.geometry import se3_inv
 from atsvo_ros.core.imu import ImuBatch, preintegrate
-from atsvo_ros.core.odometry.imu_state import VelocityWindow, clipped
+from atsvo_ros.core.odometry.imu_state import ImuState, VelocityWindow, clipped
 from atsvo_ros.errors import ImuError
 
 #: m/s^2: the magnitude the gravity estimate is scaled to (local gravity differs by < 0.3 %)
@@ -160,37 +160,24 @@ class InertialPredictor:
         newest = window.newest_ns
         if g_w is None or newest is None or not 0 < int(stamp_ns) - newest <= int(max_gap_ns):
             return None
-        state = window.fit(imu, g_w)
-        if state is None:
+        propagated = _propagate(imu, window.fit(imu, g_w), g_w, int(stamp_ns))
+        if propagated is None:
             return None
-        try:
-            pre = preintegrate(imu, state.stamp_ns, int(stamp_ns))
-        except ImuError:
-            return None
-        dt = pre.dt_s
-        p = state.p_w + state.v_w * dt + 0.5 * g_w * dt * dt + state.R_w_i @ pre.dp_m
-        v = state.v_w + g_w * dt + state.R_w_i @ pre.dv_m_s
+        p, v, R_w_i = propagated
         T_w_i = np.eye(4)
-        T_w_i[:3, :3], T_w_i[:3, 3] = state.R_w_i @ pre.R_i0_i1, p
+        T_w_i[:3, :3], T_w_i[:3, 3] = R_w_i, p
         measured = not clipped(imu, window.oldest_ns, int(stamp_ns), self.accel_range_m_s2)
-        return se3_inv(T_w_i @ se3_inv(self.T_c_imu)), self._camera(imu, int(stamp_ns), p, v, T_w_i[:3, :3], measured)
+        return se3_inv(T_w_i @ se3_inv(self.T_c_imu)), self._camera(imu, int(stamp_ns), p, v, R_w_i, measured)
 
     def _from_window(self, imu: ImuBatch, g_w: np.ndarray, last_ns: int, stamp_ns: int) -> CameraMotion | None:
         """The prediction from the window's fitted state, when the last frame is the window's newest pose."""
         if self.window is None or self.window.newest_ns != last_ns or not last_ns < stamp_ns:
             return None
-        state = self.window.fit(imu, g_w)
-        if state is None:
+        propagated = _propagate(imu, self.window.fit(imu, g_w), g_w, stamp_ns)
+        if propagated is None:
             return None
-        try:
-            pre = preintegrate(imu, state.stamp_ns, stamp_ns)
-        except ImuError:
-            return None
-        dt = pre.dt_s
-        p = state.p_w + state.v_w * dt + 0.5 * g_w * dt * dt + state.R_w_i @ pre.dp_m
-        v = state.v_w + g_w * dt + state.R_w_i @ pre.dv_m_s
         measured = not clipped(imu, self.window.oldest_ns, stamp_ns, self.accel_range_m_s2)
-        return self._camera(imu, stamp_ns, p, v, state.R_w_i @ pre.R_i0_i1, measured)
+        return self._camera(imu, stamp_ns, *propagated, measured)
 
     def _camera(self, imu: ImuBatch, stamp_ns: int, p_w: np.ndarray, v_w: np.ndarray, R_w_i: np.ndarray,
                 measured: bool) -> CameraMotion:
@@ -198,6 +185,22 @@ class InertialPredictor:
         with the body's turn as well (``w x r``)."""
         w_i = _last_rate(imu, stamp_ns)
         return CameraMotion(p_w + R_w_i @ self.t_imu_c, v_w + R_w_i @ np.cross(w_i, self.t_imu_c), measured)
+
+
+def _propagate(imu: ImuBatch, state: ImuState | None, g_w: np.ndarray,
+               stamp_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The IMU's position, velocity and orientation at ``stamp_ns`` integrated from ``state`` (None without a state
+    or when the IMU does not cover the span)."""
+    if state is None:
+        return None
+    try:
+        pre = preintegrate(imu, state.stamp_ns, stamp_ns)
+    except ImuError:
+        return None
+    dt = pre.dt_s
+    p = state.p_w + state.v_w * dt + 0.5 * g_w * dt * dt + state.R_w_i @ pre.dp_m
+    v = state.v_w + g_w * dt + state.R_w_i @ pre.dv_m_s
+    return p, v, state.R_w_i @ pre.R_i0_i1
 
 
 def _last_rate(imu: ImuBatch, stamp_ns: int) -> np.ndarray:
